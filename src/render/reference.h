@@ -1,0 +1,44 @@
+#pragma once
+// The reference renderer: float volume rendering of a SceneModel, eq. (1)-(2)
+// of the paper. It is the algorithmic golden every other renderer (the chip
+// model, the fast CPU renderer, the trainer's forward pass) is compared with.
+//
+// Sampling rule (shared by every renderer, so that skipping techniques never
+// change which samples exist): along the unit ray o + t d, candidate samples
+// sit at t_k = (k + 0.5) * delta for integers k >= 0, where
+// delta = step_micro * (scene_box edge along x / micro_res). A candidate is a
+// sample iff its point lies in an occupied micro voxel. Each sample
+// contributes alpha = 1 - exp(-sigma * delta). Marching stops once the
+// transmittance T falls below transmittance_min. The pixel is
+// sum_i T_i alpha_i c_i + T_final * background.
+#include <cstdint>
+
+#include "core/image.h"
+#include "data/camera.h"
+#include "model/scene_model.h"
+
+namespace edrnr {
+
+enum class ModelForm { Auto, Float, Quantized };  // Auto: quantized if the model has it
+
+struct RenderSettings {
+  float step_micro = 1.0f;          // delta in micro-voxel edge lengths
+  float transmittance_min = 1e-4f;  // early termination threshold
+  float background[3] = {1.f, 1.f, 1.f};
+  ModelForm form = ModelForm::Auto;
+  bool use_occupancy_tiers = true;  // false: test every candidate (a slow check of the skipping)
+  int threads = 0;                  // 0: all cores
+};
+
+struct RenderStats {
+  uint64_t rays = 0;
+  uint64_t rays_hit_aabb = 0;
+  uint64_t samples = 0;             // samples evaluated by the MLP
+  uint64_t occupancy_checks = 0;    // bitmap lookups at all tiers
+};
+
+// Renders the whole image of `camera`.
+Image render_reference(const SceneModel& model, const Camera& camera, const RenderSettings& settings,
+                       RenderStats* stats = nullptr);
+
+}  // namespace edrnr
