@@ -1,0 +1,167 @@
+#pragma once
+// Integer and fixed-point arithmetic as the chip's datapaths do it, emulated
+// exactly on int64_t storage (intermediates in __int128 where a product needs
+// it). Every function is defined for every input: widths and shifts outside
+// their range are clamped as documented, overflow saturates or wraps as named,
+// and nothing relies on undefined behaviour (C++20 fixes two's complement and
+// arithmetic right shift of negative values).
+//
+// Conventions: `bits` is the total width of the integer. A signed N-bit value
+// lies in [-2^(N-1), 2^(N-1)-1] (N in 1..64); an unsigned N-bit value in
+// [0, 2^N-1] (N in 0..63). A fixed-point number with F fraction bits stores
+// the integer q and stands for q * 2^-F.
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+namespace edrnr::fx {
+
+// How a value between two integers is rounded.
+//   Floor:    toward -infinity (a plain arithmetic shift; truncation).
+//   HalfUp:   to nearest, ties toward +infinity: add 2^(s-1), then shift. The
+//             cheap hardware rounding. -2.5 -> -2, 2.5 -> 3.
+//   HalfEven: to nearest, ties to the even integer. -2.5 -> -2, -3.5 -> -4.
+enum class Rounding { Floor, HalfUp, HalfEven };
+
+// Range limits of N-bit integers (N clamped to the valid range).
+constexpr int64_t max_signed(int bits) {
+  if (bits <= 1) return 0;
+  if (bits >= 64) return std::numeric_limits<int64_t>::max();
+  return (int64_t(1) << (bits - 1)) - 1;
+}
+constexpr int64_t min_signed(int bits) {
+  if (bits <= 1) return -1;
+  if (bits >= 64) return std::numeric_limits<int64_t>::min();
+  return -(int64_t(1) << (bits - 1));
+}
+constexpr int64_t max_unsigned(int bits) {
+  if (bits <= 0) return 0;
+  if (bits >= 63) return std::numeric_limits<int64_t>::max();
+  return (int64_t(1) << bits) - 1;
+}
+
+// Clamps x into the signed / unsigned N-bit range.
+constexpr int64_t saturate(int64_t x, int bits) {
+  const int64_t lo = min_signed(bits), hi = max_signed(bits);
+  return x < lo ? lo : (x > hi ? hi : x);
+}
+constexpr int64_t saturate_unsigned(int64_t x, int bits) {
+  const int64_t hi = max_unsigned(bits);
+  return x < 0 ? 0 : (x > hi ? hi : x);
+}
+constexpr bool fits(int64_t x, int bits) { return x >= min_signed(bits) && x <= max_signed(bits); }
+constexpr bool fits_unsigned(int64_t x, int bits) { return x >= 0 && x <= max_unsigned(bits); }
+
+// Keeps the low N bits of x (two's complement overflow): the signed version
+// sign-extends bit N-1, the unsigned one zero-extends.
+constexpr int64_t wrap(int64_t x, int bits) {
+  if (bits >= 64) return x;
+  const int n = bits < 1 ? 1 : bits;
+  const uint64_t u = uint64_t(x) << (64 - n);
+  return int64_t(u) >> (64 - n);
+}
+constexpr int64_t wrap_unsigned(int64_t x, int bits) {
+  if (bits <= 0) return 0;
+  if (bits >= 63) return int64_t(uint64_t(x) & (~uint64_t(0) >> 1));
+  return int64_t(uint64_t(x) & ((uint64_t(1) << bits) - 1));
+}
+
+namespace detail {
+// round(x / 2^s) for 0 <= s < width of I (I is int64_t or __int128).
+template <class I, class U>
+constexpr I shift_right_round(I x, int s, Rounding mode) {
+  if (s == 0) return x;
+  const I floor_q = x >> s;
+  const U rem = U(x) & ((U(1) << s) - 1);
+  const U half = U(1) << (s - 1);
+  switch (mode) {
+    case Rounding::Floor:
+      return floor_q;
+    case Rounding::HalfUp:
+      return floor_q + (rem >= half ? 1 : 0);
+    case Rounding::HalfEven:
+      return floor_q + ((rem > half || (rem == half && (floor_q & 1) != 0)) ? 1 : 0);
+  }
+  return floor_q;
+}
+}  // namespace detail
+
+// round(x / 2^shift) with the given rounding. shift > 63 behaves as the exact
+// quotient does (0, or -1 for Floor of a negative x). A negative shift
+// multiplies by 2^-shift, saturating to the int64_t range.
+constexpr int64_t shift_right_round(int64_t x, int shift, Rounding mode) {
+  if (shift < 0) {
+    if (x == 0) return 0;
+    const int up = -shift;
+    if (up >= 63) return x < 0 ? std::numeric_limits<int64_t>::min() : std::numeric_limits<int64_t>::max();
+    const int64_t limit = std::numeric_limits<int64_t>::max() >> up;
+    if (x > limit) return std::numeric_limits<int64_t>::max();
+    if (x < -limit - 1) return std::numeric_limits<int64_t>::min();
+    return int64_t(uint64_t(x) << up);
+  }
+  if (shift >= 64) {
+    // |x| / 2^shift <= 1/2, with equality only for x = -2^63, shift = 64,
+    // which both nearest modes round to 0.
+    return (mode == Rounding::Floor && x < 0) ? -1 : 0;
+  }
+  return detail::shift_right_round<int64_t, uint64_t>(x, shift, mode);
+}
+
+// round(a * b / 2^shift), the product formed exactly in 128 bits, the result
+// saturated to int64_t. shift is clamped to [0, 127].
+constexpr int64_t multiply_shift(int64_t a, int64_t b, int shift, Rounding mode) {
+  using I = __int128;
+  using U = unsigned __int128;
+  const I p = I(a) * I(b);
+  const int s = shift < 0 ? 0 : (shift > 127 ? 127 : shift);
+  const I q = detail::shift_right_round<I, U>(p, s, mode);
+  if (q > I(std::numeric_limits<int64_t>::max())) return std::numeric_limits<int64_t>::max();
+  if (q < I(std::numeric_limits<int64_t>::min())) return std::numeric_limits<int64_t>::min();
+  return int64_t(q);
+}
+
+// A real scale factor as integer-only inference stores it: the scale is
+// multiplier * 2^-shift, with 0 <= multiplier < 2^multiplier_bits and
+// 0 <= shift <= 63 (a 6-bit shift field).
+struct Requant {
+  int64_t multiplier = 1;
+  int shift = 0;
+  constexpr double scale() const { return double(multiplier) / double(uint64_t(1) << shift); }
+  constexpr bool operator==(const Requant& o) const = default;
+};
+
+// round(x * multiplier / 2^shift): x times the scale, rounded once (exact
+// 128-bit product), saturated to int64_t.
+constexpr int64_t requantize(int64_t x, Requant q, Rounding mode) {
+  return multiply_shift(x, q.multiplier, q.shift, mode);
+}
+
+// The (multiplier, shift) pair for a real scale > 0, with multiplier_bits in
+// 1..62. The multiplier is round-half-even(scale * 2^shift) for the largest
+// shift <= 63 that keeps it below 2^multiplier_bits, so normally
+// 2^(multiplier_bits-1) <= multiplier < 2^multiplier_bits and
+//   |multiplier * 2^-shift - scale| <= 2^-(shift+1) <= scale * 2^-multiplier_bits.
+// Exactness: the pair equals the scale exactly iff the scale is a dyadic
+// rational with at most multiplier_bits significant bits and an exponent the
+// shift range reaches (e.g. 0.75 with any multiplier_bits >= 2). Then
+// requantize(x) is exactly round(x * scale); otherwise requantize(x) is the
+// correctly rounded value of x * (the pair's scale), which differs from
+// round(x * scale) by at most 1 while |x * scale| <= 2^(multiplier_bits-1).
+// Scales below 2^-63 lose significant bits (multiplier may be 0).
+// Throws edrnr::Error if the scale is not finite and > 0, if
+// scale >= 2^multiplier_bits (a right shift cannot express it), or if
+// multiplier_bits is out of range.
+Requant requant_from_scale(double scale, int multiplier_bits);
+
+// The fixed-point value round(v * 2^frac_bits) saturated to a signed /
+// unsigned N-bit integer. The scaling by 2^frac_bits is exact, so the value
+// is rounded once. NaN gives 0; +-infinity saturates. frac_bits is clamped to
+// [-1000, 1000].
+int64_t to_fixed(double v, int frac_bits, int bits, Rounding mode);
+int64_t to_fixed_unsigned(double v, int frac_bits, int bits, Rounding mode);
+
+// The value q * 2^-frac_bits. Exact when |q| < 2^53 (otherwise the nearest
+// double, ties to even).
+inline double from_fixed(int64_t q, int frac_bits) { return std::ldexp(double(q), -frac_bits); }
+
+}  // namespace edrnr::fx
