@@ -1,5 +1,9 @@
 #include "data/camera.h"
 
+#include <cmath>
+
+#include "core/error.h"
+
 namespace edrnr {
 
 Ray Camera::ray_at(double u, double v) const {
@@ -9,5 +13,21 @@ Ray Camera::ray_at(double u, double v) const {
           c2w[8] * d_cam.x + c2w[9] * d_cam.y + c2w[10] * d_cam.z};
   return {origin(), normalize(d)};
 }
+
+Camera Camera::downscaled(int factor) const {
+  if (factor < 1) fail("downscale factor must be a positive integer, got {}", factor);
+  if (width % factor || height % factor)
+    fail("downscale factor {} does not divide the image size {}x{}", factor, width, height);
+  Camera out = *this;
+  out.width = width / factor;
+  out.height = height / factor;
+  out.fx = fx / factor;
+  out.fy = fy / factor;
+  out.cx = cx / factor;
+  out.cy = cy / factor;
+  return out;
+}
+
+double focal_from_fov(double size_px, double fov_rad) { return 0.5 * size_px / std::tan(0.5 * fov_rad); }
 
 }  // namespace edrnr
