@@ -56,8 +56,8 @@ CacheConfig feature_cache_config() {
   CacheConfig c;
   c.name = "feature";
   c.size_bytes = 256 * 1024;
-  c.line_bytes = 1024;  // one fine-voxel block (125 vertices x 8 bytes) padded to 1 KB
-  c.ways = 8;
+  c.line_bytes = 1024;         // one fine-voxel block (125 vertices x 8 bytes) padded to 1 KB
+  c.ways = kFullyAssociative;  // as the CFIU's functional feature cache (src/chip/feature_cache.h)
   c.banks = 8;
   c.bank_interleave_bytes = 8;  // one 16-channel INT4 vertex vector per bank word
   c.mshr_entries = 16;

@@ -48,7 +48,7 @@ TEST(Cache, Geometry) {
   EXPECT_EQ(c.set_of(200), 1u);
   EXPECT_EQ(Cache(mlp_cache_config()).sets(), 1u);  // 8448 / 64 = 132 lines, fully associative
   EXPECT_EQ(Cache(mlp_cache_config()).ways(), 132u);
-  EXPECT_EQ(Cache(feature_cache_config()).sets(), 32u);     // 256 lines of 1 KB, 8 ways
+  EXPECT_EQ(Cache(feature_cache_config()).ways(), 256u);    // 256 lines of 1 KB, fully associative
   EXPECT_EQ(Cache(micro_grid_cache_config()).sets(), 32u);  // 128 lines of 64 B, 4 ways
 }
 
