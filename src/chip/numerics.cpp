@@ -19,7 +19,7 @@ struct IntField {
   const char* use;
 };
 
-constexpr std::array<IntField, 14> kIntFields{{
+constexpr std::array<IntField, 16> kIntFields{{
     {"feature_bits", &ChipNumerics::feature_bits, 1, 8, "unsigned feature codes (CFIU)"},
     {"weight_bits", &ChipNumerics::weight_bits, 2, 16, "signed MLP weights (TME)"},
     {"activation_bits", &ChipNumerics::activation_bits, 2, 16, "signed MLP layer inputs (TME)"},
@@ -33,6 +33,9 @@ constexpr std::array<IntField, 14> kIntFields{{
     {"interp_feature_bits", &ChipNumerics::interp_feature_bits, 8, 32, "signed interpolated features (CFIU)"},
     {"interp_feature_frac_bits", &ChipNumerics::interp_feature_frac_bits, 0, 30,
      "fraction bits of interpolated features"},
+    {"direction_code_bits", &ChipNumerics::direction_code_bits, 4, 32, "signed view-direction encoding (TME input)"},
+    {"direction_code_frac_bits", &ChipNumerics::direction_code_frac_bits, 1, 30,
+     "fraction bits of the direction encoding"},
     {"lut_address_bits", &ChipNumerics::lut_address_bits, 4, 16, "activation LUT address (TME)"},
     {"alpha_bits", &ChipNumerics::alpha_bits, 2, 31, "unsigned opacity Q1.(n-1) (TME LUT, VRU)"},
     {"color_bits", &ChipNumerics::color_bits, 2, 31, "unsigned colour Q1.(n-1) (TME LUT, VRU)"},
@@ -136,6 +139,10 @@ void validate(const ChipNumerics& n) {
     fail("numerics.mlp_output_frac_bits: {} leaves no integer bits in {}-bit outputs", n.mlp_output_frac_bits,
          n.mlp_output_bits);
   }
+  if (n.direction_code_frac_bits > n.direction_code_bits - 2) {
+    fail("numerics.direction_code_frac_bits: {} leaves no room for +-1.0 in {}-bit direction codes",
+         n.direction_code_frac_bits, n.direction_code_bits);
+  }
   // The interpolated feature holds a signed feature code (feature_bits + 1
   // bits after the zero point) with its fraction bits.
   if (n.interp_feature_frac_bits + n.feature_bits + 1 > n.interp_feature_bits) {
@@ -200,12 +207,12 @@ YAML::Node numerics_to_yaml(const ChipNumerics& n) {
 }
 
 std::string numerics_table(const ChipNumerics& n) {
-  std::string s = fmt::format("{:<26} {:>6}  {}\n", "width", "bits", "use");
-  for (const IntField& f : kIntFields) s += fmt::format("{:<26} {:>6}  {}\n", f.key, n.*(f.member), f.use);
-  s += fmt::format("{:<26} {:>6}  {}\n", "rounding", rounding_name(n.rounding), "every integer narrowing");
+  std::string s = fmt::format("{:<26} {:>9}  {}\n", "width", "bits", "use");
+  for (const IntField& f : kIntFields) s += fmt::format("{:<26} {:>9}  {}\n", f.key, n.*(f.member), f.use);
+  s += fmt::format("{:<26} {:>9}  {}\n", "rounding", rounding_name(n.rounding), "every integer narrowing");
   for (const FloatField& f : kFloatFields) {
     const FloatFormat& ff = n.*(f.member);
-    s += fmt::format("{:<26} {:>6}  {}: {}\n", f.key, ff.total_bits(), f.use, ff.name());
+    s += fmt::format("{:<26} {:>9}  {}: {}\n", f.key, ff.total_bits(), f.use, ff.name());
   }
   return s;
 }

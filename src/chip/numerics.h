@@ -36,6 +36,10 @@ struct ChipNumerics {
   int interp_feature_bits = 16;      // signed INT16 interpolated feature, in feature-code steps
   int interp_feature_frac_bits = 8;  // fraction bits of the interpolated feature
 
+  // View direction encoding (TME input): [d, sin(2^k d), cos(2^k d)], all in [-1, 1].
+  int direction_code_bits = 16;       // signed INT16 direction code
+  int direction_code_frac_bits = 14;  // Q1.14: 1.0 = 16384
+
   // Activations and volume rendering (TME LUTs, VRU).
   int lut_address_bits = 10;    // entries of each activation LUT: 2^lut_address_bits
   int alpha_bits = 16;          // unsigned [0, 1] opacity, Q1.15

@@ -29,6 +29,8 @@ TEST(ChipNumerics, DefaultsFollowThePaper) {
   EXPECT_EQ(n.activation_bits, 8);
   EXPECT_EQ(n.accumulator_bits, 20);
   EXPECT_EQ(n.interp_feature_bits, 16);
+  EXPECT_EQ(n.direction_code_bits, 16);
+  EXPECT_EQ(n.direction_code_frac_bits, 14);
   EXPECT_EQ(n.ray_float, FloatFormat(8, 16, false, FloatSpecials::Saturate));
   EXPECT_EQ(n.traversal_float.total_bits(), 24);
   EXPECT_EQ(n.rounding, fx::Rounding::HalfUp);
@@ -97,6 +99,8 @@ TEST(ChipNumerics, ErrorsNameTheKey) {
   EXPECT_TRUE(contains(e, "interp_feature_bits")) << e;
   e = error_of("mlp_output_frac_bits: 15");
   EXPECT_TRUE(contains(e, "mlp_output_frac_bits")) << e;
+  e = error_of("direction_code_frac_bits: 15");
+  EXPECT_TRUE(contains(e, "direction_code_frac_bits")) << e;
   e = error_of("rounding: nearest");
   EXPECT_TRUE(contains(e, "numerics.rounding") && contains(e, "nearest")) << e;
   e = error_of("ray_float: {exponent_bits: 9}");
@@ -121,8 +125,9 @@ TEST(ChipNumerics, ErrorsNameTheKey) {
 
 TEST(ChipNumerics, TableListsEveryWidth) {
   const std::string t = numerics_table(ChipNumerics{});
-  for (const char* key : {"feature_bits", "weight_bits", "accumulator_bits", "interp_feature_bits",
-                          "transmittance_bits", "rounding", "half_up", "ray_float", "traversal_float", "e8p16"}) {
+  for (const char* key :
+       {"feature_bits", "weight_bits", "accumulator_bits", "interp_feature_bits", "transmittance_bits",
+        "direction_code_bits", "rounding", "half_up", "ray_float", "traversal_float", "e8p16"}) {
     EXPECT_TRUE(contains(t, key)) << key << "\n" << t;
   }
 }
