@@ -10,7 +10,13 @@
 // sample iff its point lies in an occupied micro voxel. Each sample
 // contributes alpha = 1 - exp(-sigma * delta). Marching stops once the
 // transmittance T falls below transmittance_min. The pixel is
-// sum_i T_i alpha_i c_i + T_final * background.
+// sum_i T_i alpha_i c_i + T_final * background. The exact float recipe for the
+// sample points, and the tier traversal, are in render/traversal.h.
+//
+// Each sample uses the MLP of the CV that contains it and the feature
+// trilinearly interpolated in its micro voxel; the view direction is encoded
+// once per ray. Rows are rendered in parallel; every pixel is computed by one
+// thread in a fixed order, so the image does not depend on the thread count.
 #include <cstdint>
 
 #include "core/image.h"
@@ -33,11 +39,24 @@ struct RenderSettings {
 struct RenderStats {
   uint64_t rays = 0;
   uint64_t rays_hit_aabb = 0;
-  uint64_t samples = 0;             // samples evaluated by the MLP
-  uint64_t occupancy_checks = 0;    // bitmap lookups at all tiers
+  uint64_t samples = 0;           // samples evaluated by the MLP
+  uint64_t occupancy_checks = 0;  // bitmap lookups at all tiers
 };
 
-// Renders the whole image of `camera`.
+// The forms a render of `model` with `requested` reads: features and MLPs
+// are chosen separately under Auto (INT4 features if present, else float;
+// INT8 MLPs if present, else float). Throws Error if a requested form is
+// missing.
+struct ResolvedForm {
+  bool quantized_features = false;
+  bool quantized_mlps = false;
+};
+ResolvedForm resolve_model_form(const SceneModel& model, ModelForm requested);
+
+// Renders the whole image of `camera` (3 channels). Throws Error for an
+// unusable model (not finalize()d, sizes that do not match, MLP layers that
+// do not match mlp_arch, an occupied micro voxel without block or MLP), an
+// empty camera or invalid settings.
 Image render_reference(const SceneModel& model, const Camera& camera, const RenderSettings& settings,
                        RenderStats* stats = nullptr);
 

@@ -1,0 +1,70 @@
+#include "render/options.h"
+
+#include <cmath>
+#include <cstdlib>
+#include <vector>
+
+#include "core/error.h"
+
+namespace edrnr {
+namespace {
+
+// Comma-separated finite numbers; false if any part is not one.
+bool parse_numbers(const std::string& text, std::vector<float>& out) {
+  out.clear();
+  size_t start = 0;
+  while (true) {
+    const size_t comma = text.find(',', start);
+    const std::string part = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    if (part.empty()) return false;
+    char* end = nullptr;
+    const double v = std::strtod(part.c_str(), &end);
+    if (end != part.c_str() + part.size() || !std::isfinite(v)) return false;
+    out.push_back(float(v));
+    if (comma == std::string::npos) return true;
+    start = comma + 1;
+  }
+}
+
+}  // namespace
+
+void parse_background(const std::string& text, const std::string& flag, float rgb[3]) {
+  if (text == "white" || text == "black") {
+    const float v = text == "white" ? 1.f : 0.f;
+    rgb[0] = rgb[1] = rgb[2] = v;
+    return;
+  }
+  std::vector<float> v;
+  if (!parse_numbers(text, v) || v.size() != 3) fail("{} '{}': expected white, black or R,G,B", flag, text);
+  for (int c = 0; c < 3; ++c) {
+    if (!(v[size_t(c)] >= 0.f && v[size_t(c)] <= 1.f)) fail("{} '{}': components must lie in [0, 1]", flag, text);
+    rgb[c] = v[size_t(c)];
+  }
+}
+
+ModelForm parse_model_form(const std::string& text, const std::string& flag) {
+  if (text == "auto") return ModelForm::Auto;
+  if (text == "float") return ModelForm::Float;
+  if (text == "quantized") return ModelForm::Quantized;
+  fail("{} '{}': expected auto, float or quantized", flag, text);
+}
+
+const char* model_form_name(ModelForm form) {
+  switch (form) {
+    case ModelForm::Auto:
+      return "auto";
+    case ModelForm::Float:
+      return "float";
+    case ModelForm::Quantized:
+      return "quantized";
+  }
+  return "?";
+}
+
+Vec3f parse_vec3(const std::string& text, const std::string& flag) {
+  std::vector<float> v;
+  if (!parse_numbers(text, v) || v.size() != 3) fail("{} '{}': expected three numbers X,Y,Z", flag, text);
+  return {v[0], v[1], v[2]};
+}
+
+}  // namespace edrnr

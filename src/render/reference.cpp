@@ -1,0 +1,208 @@
+#include "render/reference.h"
+
+#include <omp.h>
+
+#include <cmath>
+#include <vector>
+
+#include "core/error.h"
+#include "model/mlp.h"
+#include "render/traversal.h"
+
+namespace edrnr {
+namespace {
+
+void check_net(const std::vector<DenseF>& net, const std::vector<int>& widths, const char* name, size_t index) {
+  if (net.size() + 1 != widths.size())
+    fail("MLP {} has {} {} layers, mlp_arch says {}", index, net.size(), name, widths.size() - 1);
+  for (size_t l = 0; l < net.size(); ++l) {
+    const DenseF& d = net[l];
+    if (d.in != widths[l] || d.out != widths[l + 1] || d.w.size() != size_t(d.in) * size_t(d.out) ||
+        d.b.size() != size_t(d.out))
+      fail("MLP {} {} layer {} is {}x{} with {} weights, mlp_arch says {}x{}", index, name, l, d.out, d.in, d.w.size(),
+           widths[l + 1], widths[l]);
+  }
+}
+
+void check_arch(const MlpArch& arch, int feature_channels) {
+  const auto& dw = arch.density_widths;
+  const auto& cw = arch.color_widths;
+  if (dw.size() < 2 || cw.size() < 2) fail("mlp_arch needs at least one layer in each net");
+  if (dw.front() != feature_channels)
+    fail("mlp_arch density input {} does not match the {} feature channels", dw.front(), feature_channels);
+  if (dw.back() < 1 || cw.front() != dw.back() + arch.dir_dims())
+    fail("mlp_arch colour input {} is not the density output {} plus {} direction values", cw.front(), dw.back(),
+         arch.dir_dims());
+  if (cw.back() != 3) fail("mlp_arch colour net has {} outputs, expected 3", cw.back());
+  if (arch.dir_frequencies < 0) fail("mlp_arch direction frequencies {} is negative", arch.dir_frequencies);
+  for (const auto* w : {&dw, &cw})
+    for (int n : *w)
+      if (n < 1 || n > kMlpEvalMaxWidth) fail("mlp_arch layer width {} is outside 1..{}", n, kMlpEvalMaxWidth);
+}
+
+void check_model(const SceneModel& m, const ResolvedForm& form) {
+  if (m.micro_res <= 0 || m.micro_res % 32)
+    fail("model micro resolution {} is not a positive multiple of 32", m.micro_res);
+  for (int a = 0; a < 3; ++a)
+    if (!(m.scene_box.size()[a] > 0.f)) fail("model scene box is empty along axis {}", a);
+  for (int t = 0; t < kTierCount; ++t)
+    if (m.occupancy[t].res() != m.tier_res(Tier(t)))
+      fail("model {} bitmap has resolution {}, expected {}", tier_name(Tier(t)), m.occupancy[t].res(),
+           m.tier_res(Tier(t)));
+  const size_t fr = size_t(m.fine_res()), cr = size_t(m.coarse_res());
+  if (m.fine_to_block.size() != fr * fr * fr || m.coarse_to_mlp.size() != cr * cr * cr)
+    fail("model lookups are missing (call finalize() after building or editing a model)");
+  const size_t F = size_t(m.feature_channels);
+  if (F < 1) fail("model has {} feature channels", m.feature_channels);
+  const size_t values = m.block_count() * kBlockVerts * F;
+  if (m.block_count() > 0) {
+    if (form.quantized_features) {
+      if (m.features_q4.size() != (values + 1) / 2 || m.feature_quant.scale.size() != F ||
+          m.feature_quant.zero_point.size() != F)
+        fail("model INT4 features hold {} bytes, expected {} for {} blocks", m.features_q4.size(), (values + 1) / 2,
+             m.block_count());
+    } else if (m.features_f32.size() != values) {
+      fail("model float features hold {} values, expected {} for {} blocks", m.features_f32.size(), values,
+           m.block_count());
+    }
+  }
+  if (m.mlp_count() > 0) {
+    check_arch(m.mlp_arch, m.feature_channels);
+    const size_t n = form.quantized_mlps ? m.mlps_q8.size() : m.mlps_f32.size();
+    if (n != m.mlp_count()) fail("model has {} MLPs of the rendered form for {} coarse voxels", n, m.mlp_count());
+    for (size_t i = 0; i < n; ++i) {
+      if (form.quantized_mlps) {
+        const MlpQ& q = m.mlps_q8[i];
+        for (const auto* net : {&q.density, &q.color})
+          for (const DenseQ& d : *net)
+            if (d.w_scale.size() != size_t(d.out) || d.w.size() != size_t(d.in) * size_t(d.out) ||
+                d.b.size() != size_t(d.out))
+              fail("INT8 MLP {} has a layer whose sizes do not match {}x{}", i, d.out, d.in);
+        const MlpF f = dequantize_mlp(q);
+        check_net(f.density, m.mlp_arch.density_widths, "density", i);
+        check_net(f.color, m.mlp_arch.color_widths, "colour", i);
+      } else {
+        check_net(m.mlps_f32[i].density, m.mlp_arch.density_widths, "density", i);
+        check_net(m.mlps_f32[i].color, m.mlp_arch.color_widths, "colour", i);
+      }
+    }
+  }
+}
+
+void check_inputs(const Camera& camera, const RenderSettings& s) {
+  if (camera.width <= 0 || camera.height <= 0) fail("camera image size {}x{} is empty", camera.width, camera.height);
+  if (!(std::isfinite(camera.fx) && std::isfinite(camera.fy) && camera.fx != 0 && camera.fy != 0))
+    fail("camera focal lengths {}, {} are not finite and non-zero", camera.fx, camera.fy);
+  if (!(s.step_micro > 0.f && std::isfinite(s.step_micro))) fail("render step {} must be positive", s.step_micro);
+  if (!(s.transmittance_min >= 0.f && s.transmittance_min <= 1.f))
+    fail("transmittance threshold {} is outside [0, 1]", s.transmittance_min);
+  if (s.threads < 0) fail("thread count {} is negative", s.threads);
+}
+
+}  // namespace
+
+ResolvedForm resolve_model_form(const SceneModel& model, ModelForm requested) {
+  const bool need_features = model.block_count() > 0, need_mlps = model.mlp_count() > 0;
+  const bool has_f32 = !model.features_f32.empty(), has_q4 = !model.features_q4.empty();
+  const bool has_mlp_f32 = !model.mlps_f32.empty(), has_mlp_q8 = !model.mlps_q8.empty();
+  ResolvedForm r;
+  switch (requested) {
+    case ModelForm::Float:
+      if (need_features && !has_f32) fail("the model has no float features (only its quantized form can be rendered)");
+      if (need_mlps && !has_mlp_f32) fail("the model has no float MLPs (only its quantized form can be rendered)");
+      break;
+    case ModelForm::Quantized:
+      if (need_features && !has_q4) fail("the model has no INT4 features (only its float form can be rendered)");
+      if (need_mlps && !has_mlp_q8) fail("the model has no INT8 MLPs (only its float form can be rendered)");
+      r.quantized_features = true;
+      r.quantized_mlps = true;
+      break;
+    case ModelForm::Auto:
+      r.quantized_features = has_q4 || !has_f32;
+      r.quantized_mlps = has_mlp_q8 || !has_mlp_f32;
+      if (need_features && !has_q4 && !has_f32) fail("the model has occupied fine voxels but no features");
+      if (need_mlps && !has_mlp_q8 && !has_mlp_f32) fail("the model has occupied coarse voxels but no MLPs");
+      break;
+  }
+  return r;
+}
+
+Image render_reference(const SceneModel& model, const Camera& camera, const RenderSettings& settings,
+                       RenderStats* stats) {
+  check_inputs(camera, settings);
+  const ResolvedForm form = resolve_model_form(model, settings.form);
+  check_model(model, form);
+
+  // The MLPs this render reads, dequantized once.
+  std::vector<MlpF> dequantized;
+  if (form.quantized_mlps)
+    for (const MlpQ& q : model.mlps_q8) dequantized.push_back(dequantize_mlp(q));
+  const std::vector<MlpF>& mlps = form.quantized_mlps ? dequantized : model.mlps_f32;
+  const FeatureSource source = form.quantized_features ? FeatureSource::Quantized : FeatureSource::Float;
+
+  const int W = camera.width, H = camera.height;
+  const int F = model.feature_channels;
+  const int L = model.mlp_arch.dir_frequencies;
+  const int cr = model.coarse_res();
+  const int cv_micro = kMicroPerFine * kFinePerCoarse;
+  const float delta = sample_spacing(model, settings.step_micro);
+  const Box3d aabb{model.object_aabb.lo.cast<double>(), model.object_aabb.hi.cast<double>()};
+  const int threads = settings.threads > 0 ? settings.threads : omp_get_max_threads();
+
+  Image image(W, H, 3);
+  RenderStats total;
+  uint64_t missing = 0;  // samples in an occupied micro voxel without block or MLP
+#pragma omp parallel num_threads(threads)
+  {
+    RenderStats local;
+    uint64_t local_missing = 0;
+    std::vector<float> feature(static_cast<size_t>(F));
+    std::vector<float> dir_enc(static_cast<size_t>(3 + 6 * L));
+#pragma omp for schedule(dynamic, 1)
+    for (int y = 0; y < H; ++y) {
+      for (int x = 0; x < W; ++x) {
+        const Ray ray = camera.pixel_ray(x, y);
+        ++local.rays;
+        double t_near, t_far;
+        if (intersect_box(ray.origin, ray.dir, aabb, t_near, t_far) && t_far >= 0) ++local.rays_hit_aabb;
+        encode_direction(ray.dir.cast<float>(), L, dir_enc.data());
+        SampleMarcher march(model, ray, make_micro_ray(model, ray, delta), settings.use_occupancy_tiers);
+        float T = 1.f;
+        float rgb[3] = {0.f, 0.f, 0.f};
+        MarchSample s;
+        while (T >= settings.transmittance_min && march.next(s)) {
+          const int32_t mlp =
+              model.coarse_to_mlp[linear_index(s.voxel.x / cv_micro, s.voxel.y / cv_micro, s.voxel.z / cv_micro, cr)];
+          if (mlp < 0 || !interpolate_feature(model, s.p_micro, source, feature.data())) {
+            ++local_missing;
+            continue;
+          }
+          const MlpOutput out = eval_mlp(model.mlp_arch, mlps[size_t(mlp)], feature.data(), dir_enc.data());
+          ++local.samples;
+          const float tau = out.sigma * delta;
+          const float weight = T * -std::expm1(-tau);  // T_i * alpha_i
+          for (int c = 0; c < 3; ++c) rgb[c] += weight * out.rgb[c];
+          T *= std::exp(-tau);
+        }
+        local.occupancy_checks += march.occupancy_checks();
+        float* px = image.at(x, y);
+        for (int c = 0; c < 3; ++c) px[c] = rgb[c] + T * settings.background[c];
+      }
+    }
+#pragma omp critical
+    {
+      total.rays += local.rays;
+      total.rays_hit_aabb += local.rays_hit_aabb;
+      total.samples += local.samples;
+      total.occupancy_checks += local.occupancy_checks;
+      missing += local_missing;
+    }
+  }
+  if (missing)
+    fail("{} samples lie in occupied micro voxels without a feature block or MLP (the model breaks its invariants)",
+         missing);
+  if (stats) *stats = total;
+  return image;
+}
+
+}  // namespace edrnr
