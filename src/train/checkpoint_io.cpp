@@ -1,0 +1,87 @@
+#include "train/checkpoint_io.h"
+
+#include <zlib.h>
+
+namespace edrnr::train {
+namespace {
+
+constexpr char kMagic[8] = {'E', 'D', 'R', 'N', 'R', 'C', 'K', 'P'};
+constexpr size_t kHeaderBytes = 24;
+
+uint32_t crc32_of(const uint8_t* data, size_t n) {
+  uLong crc = crc32(0L, Z_NULL, 0);
+  while (n) {
+    const uInt chunk = uInt(std::min<size_t>(n, 1u << 30));
+    crc = crc32(crc, data, chunk);
+    data += chunk;
+    n -= chunk;
+  }
+  return uint32_t(crc);
+}
+
+template <class T>
+void append(std::vector<uint8_t>& out, const T& v) {
+  const auto* p = reinterpret_cast<const uint8_t*>(&v);
+  out.insert(out.end(), p, p + sizeof v);
+}
+
+}  // namespace
+
+void CheckpointWriter::put_bytes(const std::string& name, const void* data, size_t bytes) {
+  append(body_, uint32_t(name.size()));
+  body_.insert(body_.end(), name.begin(), name.end());
+  append(body_, uint64_t(bytes));
+  const auto* p = static_cast<const uint8_t*>(data);
+  if (bytes) body_.insert(body_.end(), p, p + bytes);
+  ++count_;
+}
+
+std::vector<uint8_t> CheckpointWriter::finish() const {
+  std::vector<uint8_t> out;
+  out.reserve(kHeaderBytes + body_.size());
+  out.insert(out.end(), kMagic, kMagic + 8);
+  append(out, kCheckpointVersion);
+  append(out, count_);
+  append(out, crc32_of(body_.data(), body_.size()));
+  append(out, uint32_t(0));
+  out.insert(out.end(), body_.begin(), body_.end());
+  return out;
+}
+
+CheckpointReader::CheckpointReader(const std::vector<uint8_t>& bytes, std::string source) : source_(std::move(source)) {
+  if (bytes.size() < kHeaderBytes || std::memcmp(bytes.data(), kMagic, 8) != 0)
+    fail("{}: not an edrnr training checkpoint (bad magic)", source_);
+  uint32_t version, count, crc;
+  std::memcpy(&version, bytes.data() + 8, 4);
+  std::memcpy(&count, bytes.data() + 12, 4);
+  std::memcpy(&crc, bytes.data() + 16, 4);
+  if (version != kCheckpointVersion)
+    fail("{}: checkpoint version {} is not the supported version {}", source_, version, kCheckpointVersion);
+  if (crc32_of(bytes.data() + kHeaderBytes, bytes.size() - kHeaderBytes) != crc)
+    fail("{}: checkpoint is corrupt (CRC mismatch)", source_);
+  size_t pos = kHeaderBytes;
+  for (uint32_t i = 0; i < count; ++i) {
+    uint32_t name_len;
+    uint64_t size;
+    if (bytes.size() - pos < 4) fail("{}: checkpoint truncated in section {}", source_, i);
+    std::memcpy(&name_len, bytes.data() + pos, 4);
+    pos += 4;
+    if (bytes.size() - pos < uint64_t(name_len) + 8) fail("{}: checkpoint truncated in section {}", source_, i);
+    std::string name(reinterpret_cast<const char*>(bytes.data() + pos), name_len);
+    pos += name_len;
+    std::memcpy(&size, bytes.data() + pos, 8);
+    pos += 8;
+    if (bytes.size() - pos < size) fail("{}: checkpoint section '{}' is truncated", source_, name);
+    sections_[name] = std::string_view(reinterpret_cast<const char*>(bytes.data() + pos), size_t(size));
+    pos += size_t(size);
+  }
+  if (pos != bytes.size()) fail("{}: checkpoint has {} trailing bytes", source_, bytes.size() - pos);
+}
+
+std::string_view CheckpointReader::bytes(const std::string& name) const {
+  auto it = sections_.find(name);
+  if (it == sections_.end()) fail("{}: checkpoint has no section '{}'", source_, name);
+  return it->second;
+}
+
+}  // namespace edrnr::train

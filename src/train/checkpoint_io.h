@@ -1,0 +1,70 @@
+#pragma once
+// A small tagged binary container for trainer checkpoints: magic
+// "EDRNRCKP", format version, section count, CRC-32 of everything after the
+// 24-byte header; then sections of (name, byte size, bytes). Little-endian
+// host layout (x86-64 and AArch64).
+#include <cstdint>
+#include <cstring>
+#include <map>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/error.h"
+
+namespace edrnr::train {
+
+inline constexpr uint32_t kCheckpointVersion = 1;
+
+class CheckpointWriter {
+ public:
+  void put_bytes(const std::string& name, const void* data, size_t bytes);
+  template <class T>
+  void put(const std::string& name, const std::vector<T>& v) {
+    put_bytes(name, v.data(), v.size() * sizeof(T));
+  }
+  template <class T>
+  void put_value(const std::string& name, const T& v) {
+    put_bytes(name, &v, sizeof v);
+  }
+  void put_string(const std::string& name, const std::string& s) { put_bytes(name, s.data(), s.size()); }
+  // The finished file.
+  std::vector<uint8_t> finish() const;
+
+ private:
+  std::vector<uint8_t> body_;
+  uint32_t count_ = 0;
+};
+
+class CheckpointReader {
+ public:
+  // Validates magic, version, sizes and CRC; throws Error naming `source`.
+  CheckpointReader(const std::vector<uint8_t>& bytes, std::string source);
+  bool has(const std::string& name) const { return sections_.count(name) != 0; }
+  std::string_view bytes(const std::string& name) const;
+  template <class T>
+  std::vector<T> get(const std::string& name) const {
+    auto b = bytes(name);
+    if (b.size() % sizeof(T))
+      fail("{}: section '{}' has {} bytes, not a whole number of items", source_, name, b.size());
+    std::vector<T> v(b.size() / sizeof(T));
+    if (!v.empty()) std::memcpy(v.data(), b.data(), b.size());
+    return v;
+  }
+  template <class T>
+  T get_value(const std::string& name) const {
+    auto b = bytes(name);
+    if (b.size() != sizeof(T)) fail("{}: section '{}' has {} bytes, expected {}", source_, name, b.size(), sizeof(T));
+    T v;
+    std::memcpy(&v, b.data(), sizeof v);
+    return v;
+  }
+  std::string get_string(const std::string& name) const { return std::string(bytes(name)); }
+  const std::string& source() const { return source_; }
+
+ private:
+  std::string source_;
+  std::map<std::string, std::string_view> sections_;
+};
+
+}  // namespace edrnr::train

@@ -1,0 +1,199 @@
+#include "train/config.h"
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+#include <yaml-cpp/yaml.h>
+
+#include <bit>
+#include <functional>
+#include <map>
+
+#include "core/error.h"
+#include "core/file_io.h"
+
+namespace edrnr::train {
+
+MlpArch TrainConfig::mlp_arch() const {
+  MlpArch a;
+  a.dir_frequencies = dir_frequencies;
+  a.density_widths.push_back(feature_channels());
+  for (int w : density_hidden) a.density_widths.push_back(w);
+  a.density_widths.push_back(geo_features);
+  a.color_widths.push_back(geo_features + a.dir_dims());
+  for (int w : color_hidden) a.color_widths.push_back(w);
+  a.color_widths.push_back(3);
+  return a;
+}
+
+void TrainConfig::validate() const {
+  for (int a = 0; a < 3; ++a)
+    if (!(scene_box.hi[a] > scene_box.lo[a])) fail("train config: scene_box must have hi > lo on every axis");
+  const float ex = scene_box.hi.x - scene_box.lo.x;
+  for (int a = 1; a < 3; ++a)
+    if (std::fabs((scene_box.hi[a] - scene_box.lo[a]) - ex) > 1e-6f * ex)
+      fail("train config: scene_box must be a cube");
+  if (micro_res < 32 || micro_res % 32 || micro_res > 1024)
+    fail("train config: micro_res {} must be a multiple of 32 in [32, 1024]", micro_res);
+  if (levels.empty()) fail("train config: levels must list at least one resolution");
+  for (int r : levels)
+    if (r <= 0 || r > micro_res || micro_res % r || !std::has_single_bit(unsigned(micro_res / r)))
+      fail("train config: levels entry {} must divide micro_res {} by a power of two", r, micro_res);
+  if (geo_features < 1) fail("train config: geo_features must be at least 1");
+  for (int w : density_hidden)
+    if (w < 1 || w > 256) fail("train config: density_hidden widths must be in [1, 256]");
+  for (int w : color_hidden)
+    if (w < 1 || w > 256) fail("train config: color_hidden widths must be in [1, 256]");
+  if (dir_frequencies < 0 || dir_frequencies > 8) fail("train config: dir_frequencies must be in [0, 8]");
+  if (mlp_arch().q8_bytes() > kMlpCacheBytes)
+    fail("train config: the MLP needs {} bytes in INT8, more than the {}-byte MLP cache", mlp_arch().q8_bytes(),
+         kMlpCacheBytes);
+  if (!(step_micro > 0.f)) fail("train config: step_micro must be positive");
+  if (!(transmittance_min > 0.f && transmittance_min < 1.f)) fail("train config: transmittance_min must be in (0, 1)");
+  if (iters < 1) fail("train config: iters must be at least 1");
+  if (minutes < 0) fail("train config: minutes must not be negative");
+  if (!(per_cv_fraction >= 0.f && qat_fraction >= 0.f && per_cv_fraction + qat_fraction < 1.f))
+    fail("train config: per_cv_fraction and qat_fraction must be >= 0 and sum to less than 1");
+  if (batch_samples < 1024) fail("train config: batch_samples must be at least 1024");
+  if (min_rays < 1 || max_rays < min_rays) fail("train config: need 1 <= min_rays <= max_rays");
+  if (!(lr_features > 0.f) || !(lr_mlp > 0.f)) fail("train config: learning rates must be positive");
+  if (!(lr_final > 0.f && lr_final <= 1.f)) fail("train config: lr_final must be in (0, 1]");
+  if (lr_warmup < 0) fail("train config: lr_warmup must not be negative");
+  if (!(adam_beta1 >= 0.f && adam_beta1 < 1.f && adam_beta2 >= 0.f && adam_beta2 < 1.f && adam_eps > 0.f))
+    fail("train config: Adam needs 0 <= beta < 1 and eps > 0");
+  if (!(tv_weight >= 0.f)) fail("train config: tv_weight must not be negative");
+  if (!(init_features >= 0.f)) fail("train config: init_features must not be negative");
+  if (occupancy_every < 1) fail("train config: occupancy_every must be at least 1");
+  if (!(occupancy_decay > 0.f && occupancy_decay <= 1.f)) fail("train config: occupancy_decay must be in (0, 1]");
+  if (!(occupancy_alpha > 0.f && occupancy_alpha < 1.f)) fail("train config: occupancy_alpha must be in (0, 1)");
+  if (aabb_every < 1 || aabb_start < 0) fail("train config: aabb_every must be >= 1 and aabb_start >= 0");
+  if (!(aabb_filter_sigma >= 0.f)) fail("train config: aabb_filter_sigma must not be negative");
+  if (!(aabb_keep > 0.f && aabb_keep <= 1.f)) fail("train config: aabb_keep must be in (0, 1]");
+  if (quant_refit_every < 1) fail("train config: quant_refit_every must be at least 1");
+  if (downscale < 1) fail("train config: downscale must be at least 1");
+  for (float b : background)
+    if (!(b >= 0.f && b <= 1.f)) fail("train config: background values must be in [0, 1]");
+}
+
+namespace {
+
+struct Field {
+  std::function<void(TrainConfig&, const YAML::Node&)> read;
+  std::function<std::string(const TrainConfig&)> write;
+};
+
+template <class T>
+Field scalar(T TrainConfig::*member) {
+  return {[member](TrainConfig& c, const YAML::Node& n) { c.*member = n.as<T>(); },
+          [member](const TrainConfig& c) { return fmt::format("{}", c.*member); }};
+}
+
+Field int_list(std::vector<int> TrainConfig::*member) {
+  return {[member](TrainConfig& c, const YAML::Node& n) { c.*member = n.as<std::vector<int>>(); },
+          [member](const TrainConfig& c) { return fmt::format("[{}]", fmt::join(c.*member, ", ")); }};
+}
+
+const std::map<std::string, Field>& fields() {
+  static const std::map<std::string, Field> f = {
+      {"scene_box",
+       {[](TrainConfig& c, const YAML::Node& n) {
+          auto v = n.as<std::vector<float>>();
+          if (v.size() == 2) {
+            c.scene_box = {{v[0], v[0], v[0]}, {v[1], v[1], v[1]}};
+          } else if (v.size() == 6) {
+            c.scene_box = {{v[0], v[1], v[2]}, {v[3], v[4], v[5]}};
+          } else {
+            throw YAML::Exception(n.Mark(), "expected [lo, hi] or [x0, y0, z0, x1, y1, z1]");
+          }
+        },
+        [](const TrainConfig& c) {
+          return fmt::format("[{}, {}, {}, {}, {}, {}]", c.scene_box.lo.x, c.scene_box.lo.y, c.scene_box.lo.z,
+                             c.scene_box.hi.x, c.scene_box.hi.y, c.scene_box.hi.z);
+        }}},
+      {"micro_res", scalar(&TrainConfig::micro_res)},
+      {"levels", int_list(&TrainConfig::levels)},
+      {"density_hidden", int_list(&TrainConfig::density_hidden)},
+      {"geo_features", scalar(&TrainConfig::geo_features)},
+      {"color_hidden", int_list(&TrainConfig::color_hidden)},
+      {"dir_frequencies", scalar(&TrainConfig::dir_frequencies)},
+      {"step_micro", scalar(&TrainConfig::step_micro)},
+      {"transmittance_min", scalar(&TrainConfig::transmittance_min)},
+      {"background",
+       {[](TrainConfig& c, const YAML::Node& n) {
+          auto v = n.as<std::vector<float>>();
+          if (v.size() != 3) throw YAML::Exception(n.Mark(), "expected [r, g, b]");
+          for (int i = 0; i < 3; ++i) c.background[i] = v[size_t(i)];
+        },
+        [](const TrainConfig& c) {
+          return fmt::format("[{}, {}, {}]", c.background[0], c.background[1], c.background[2]);
+        }}},
+      {"iters", scalar(&TrainConfig::iters)},
+      {"minutes", scalar(&TrainConfig::minutes)},
+      {"per_cv_fraction", scalar(&TrainConfig::per_cv_fraction)},
+      {"qat_fraction", scalar(&TrainConfig::qat_fraction)},
+      {"batch_samples", scalar(&TrainConfig::batch_samples)},
+      {"max_rays", scalar(&TrainConfig::max_rays)},
+      {"min_rays", scalar(&TrainConfig::min_rays)},
+      {"lr_features", scalar(&TrainConfig::lr_features)},
+      {"lr_mlp", scalar(&TrainConfig::lr_mlp)},
+      {"lr_final", scalar(&TrainConfig::lr_final)},
+      {"lr_warmup", scalar(&TrainConfig::lr_warmup)},
+      {"adam_beta1", scalar(&TrainConfig::adam_beta1)},
+      {"adam_beta2", scalar(&TrainConfig::adam_beta2)},
+      {"adam_eps", scalar(&TrainConfig::adam_eps)},
+      {"tv_weight", scalar(&TrainConfig::tv_weight)},
+      {"init_features", scalar(&TrainConfig::init_features)},
+      {"occupancy_every", scalar(&TrainConfig::occupancy_every)},
+      {"occupancy_decay", scalar(&TrainConfig::occupancy_decay)},
+      {"occupancy_alpha", scalar(&TrainConfig::occupancy_alpha)},
+      {"aabb_start", scalar(&TrainConfig::aabb_start)},
+      {"aabb_every", scalar(&TrainConfig::aabb_every)},
+      {"aabb_filter_sigma", scalar(&TrainConfig::aabb_filter_sigma)},
+      {"aabb_keep", scalar(&TrainConfig::aabb_keep)},
+      {"quant_refit_every", scalar(&TrainConfig::quant_refit_every)},
+      {"seed", scalar(&TrainConfig::seed)},
+      {"downscale", scalar(&TrainConfig::downscale)},
+      {"split", scalar(&TrainConfig::split)},
+  };
+  return f;
+}
+
+}  // namespace
+
+TrainConfig parse_train_config(const std::string& yaml_text, const std::string& source, TrainConfig base) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::Exception& e) {
+    fail("{}: not valid YAML: {}", source, e.what());
+  }
+  if (root.IsNull()) return base;
+  if (!root.IsMap()) fail("{}: expected a mapping of setting: value", source);
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    auto it = fields().find(key);
+    if (it == fields().end()) fail("{}: unknown setting '{}'", source, key);
+    try {
+      it->second.read(base, kv.second);
+    } catch (const YAML::Exception& e) {
+      fail("{}: setting '{}' has a bad value (line {}): {}", source, key, e.mark.line + 1, e.msg);
+    }
+  }
+  try {
+    base.validate();
+  } catch (const Error& e) {
+    fail("{}: {}", source, e.what());
+  }
+  return base;
+}
+
+TrainConfig load_train_config(const std::filesystem::path& path, TrainConfig base) {
+  return parse_train_config(read_file_text(path), path.string(), std::move(base));
+}
+
+std::string to_yaml(const TrainConfig& config) {
+  std::string out;
+  for (const auto& [key, field] : fields()) out += fmt::format("{}: {}\n", key, field.write(config));
+  return out;
+}
+
+}  // namespace edrnr::train

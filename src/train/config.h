@@ -1,0 +1,76 @@
+#pragma once
+// Trainer settings: every field a preset (configs/train/*.yaml) may set, with
+// its default. Durations are in training steps unless the name says otherwise.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/vec.h"
+#include "model/scene_model.h"
+
+namespace edrnr::train {
+
+struct TrainConfig {
+  // --- model ---
+  Box3f scene_box{{-1.5f, -1.5f, -1.5f}, {1.5f, 1.5f, 1.5f}};  // must be a cube
+  int micro_res = 256;                                         // Rm, a multiple of 32
+  std::vector<int> levels{32, 64, 128, 256};                   // feature pyramid resolutions (4 channels each)
+  std::vector<int> density_hidden{32};                         // density net hidden widths
+  int geo_features = 16;                                       // density net outputs (G)
+  std::vector<int> color_hidden{32, 32};                       // colour net hidden widths
+  int dir_frequencies = 2;                                     // L
+  float step_micro = 1.f;                                      // sample spacing in micro voxels (as the renderer)
+  float transmittance_min = 1e-4f;                             // early termination (as the renderer)
+  float background[3] = {1.f, 1.f, 1.f};
+
+  // --- schedule ---
+  int64_t iters = 20000;          // total steps
+  double minutes = 0;             // > 0: choose iters to fit this budget (measured after a calibration)
+  float per_cv_fraction = 0.1f;   // share of steps training per-CV MLPs in float
+  float qat_fraction = 0.1f;      // share of steps of quantization-aware training (last)
+  int64_t batch_samples = 65536;  // target samples evaluated per step
+  int max_rays = 16384;           // rays per step, at most
+  int min_rays = 256;             // rays per step, at least
+
+  // --- optimiser ---
+  float lr_features = 1e-2f;
+  float lr_mlp = 1e-2f;
+  float lr_final = 0.05f;   // the learning rate decays exponentially to this factor at the last step
+  int64_t lr_warmup = 100;  // linear warm-up steps
+  float adam_beta1 = 0.9f, adam_beta2 = 0.99f, adam_eps = 1e-15f;
+  float tv_weight = 0.f;        // total variation on the finest level (main phase)
+  float init_features = 1e-4f;  // initial feature values: uniform in +-this
+
+  // --- occupancy ---
+  int occupancy_every = 16;       // steps between partial refreshes (one of 8 parts each)
+  float occupancy_decay = 0.95f;  // decay per refresh of the running density maximum
+  float occupancy_alpha = 0.01f;  // a voxel is occupied if its alpha at one step exceeds this
+  int64_t aabb_start = 512;       // first AABB update
+  int64_t aabb_every = 256;
+  float aabb_filter_sigma = 0.6f;  // Gaussian filter of the occupancy, in micro voxels
+  float aabb_keep = 0.35f;         // filtered occupancy kept in the AABB
+
+  // --- quantization ---
+  int quant_refit_every = 16;  // steps between refits of the INT4 feature ranges
+
+  // --- run ---
+  uint64_t seed = 0;
+  int downscale = 1;  // image downscale factor when loading a dataset
+  std::string split = "train";
+
+  MlpArch mlp_arch() const;
+  int feature_channels() const { return 4 * int(levels.size()); }
+  float delta() const { return step_micro * (scene_box.hi.x - scene_box.lo.x) / float(micro_res); }
+  // Throws Error naming the first invalid field.
+  void validate() const;
+};
+
+// Applies a YAML preset on top of `base`. Unknown keys and bad values throw
+// Error naming the file and the key.
+TrainConfig load_train_config(const std::filesystem::path& path, TrainConfig base = {});
+TrainConfig parse_train_config(const std::string& yaml_text, const std::string& source, TrainConfig base = {});
+// The config as YAML (every field), for checkpoints and model metadata.
+std::string to_yaml(const TrainConfig& config);
+
+}  // namespace edrnr::train

@@ -1,0 +1,318 @@
+#include "train/feature_grid.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+
+#include "core/error.h"
+#include "train/rng.h"
+
+namespace edrnr::train {
+
+void GradientSlabs::build(int micro_res, int slab_micro_, const std::vector<int32_t>& ids,
+                          const std::vector<int16_t>& micro) {
+  slab_micro = slab_micro_;
+  const int n_slabs = micro_res / slab_micro;
+  begin.assign(size_t(n_slabs) + 1, 0);
+  for (int32_t s : ids) ++begin[size_t(micro[3 * size_t(s) + 2] / slab_micro) + 1];
+  for (int j = 0; j < n_slabs; ++j) begin[size_t(j) + 1] += begin[size_t(j)];
+  samples.resize(ids.size());
+  std::vector<int32_t> fill(begin.begin(), begin.end() - 1);
+  for (int32_t s : ids) samples[size_t(fill[size_t(micro[3 * size_t(s) + 2] / slab_micro)]++)] = s;
+}
+
+void LazyAdamArray::resize(size_t vertices, int channels, int slabs) {
+  grad.assign(vertices * size_t(channels), 0.f);
+  m.assign(vertices * size_t(channels), 0.f);
+  v.assign(vertices * size_t(channels), 0.f);
+  touched.assign(vertices, 0);
+  touched_list.assign(size_t(slabs), {});
+}
+
+// ---------------------------------------------------------------------------
+// FeaturePyramid
+
+FeaturePyramid::FeaturePyramid(int micro_res, const std::vector<int>& level_res, uint64_t seed, float init_scale)
+    : micro_res_(micro_res) {
+  if (level_res.empty()) fail("feature levels: at least one level is needed");
+  for (int r : level_res) {
+    if (r <= 0 || r > micro_res || micro_res % r || !std::has_single_bit(unsigned(micro_res / r)))
+      fail("feature levels: resolution {} does not divide the micro resolution {} by a power of two", r, micro_res);
+  }
+  int max_cell = 1;
+  for (int r : level_res) max_cell = std::max(max_cell, micro_res / r);
+  const int slabs = micro_res / max_cell;
+  for (size_t li = 0; li < level_res.size(); ++li) {
+    PyramidLevel L;
+    L.res = level_res[li];
+    L.shift = std::countr_zero(unsigned(micro_res / L.res));
+    size_t nv = size_t(L.res + 1) * size_t(L.res + 1) * size_t(L.res + 1);
+    L.value.resize(nv * kLevelChannels);
+    const uint64_t base = hash3(seed, uint64_t(RngStream::GridInit), li);
+    float* val = L.value.data();
+    const size_t total = L.value.size();
+#pragma omp parallel for schedule(static)
+    for (size_t i = 0; i < total; ++i) val[i] = (2.f * uniform01(hash_combine(base, i)) - 1.f) * init_scale;
+    L.adam.resize(nv, kLevelChannels, slabs);
+    levels_.push_back(std::move(L));
+  }
+}
+
+int FeaturePyramid::slab_micro() const {
+  int max_cell = 1;
+  for (const auto& L : levels_) max_cell = std::max(max_cell, 1 << L.shift);
+  return max_cell;
+}
+
+void FeaturePyramid::interpolate(const Vec3f& p, const Vec3i& m, float* out) const {
+  for (size_t li = 0; li < levels_.size(); ++li) {
+    const PyramidLevel& L = levels_[li];
+    const float inv = 1.f / float(1 << L.shift);  // exact: a power of two
+    const int cx = m.x >> L.shift, cy = m.y >> L.shift, cz = m.z >> L.shift;
+    float w[8];
+    trilinear_weights(p.x * inv - float(cx), p.y * inv - float(cy), p.z * inv - float(cz), w);
+    const size_t n = size_t(L.res) + 1;
+    const size_t base = L.vertex_index(cx, cy, cz);
+    const size_t off[8] = {0, 1, n, n + 1, n * n, n * n + 1, n * n + n, n * n + n + 1};
+    float acc[kLevelChannels] = {0, 0, 0, 0};
+    for (int c = 0; c < 8; ++c) {
+      const float* v = &L.value[(base + off[c]) * kLevelChannels];
+      for (int k = 0; k < kLevelChannels; ++k) acc[k] += w[c] * v[k];
+    }
+    for (int k = 0; k < kLevelChannels; ++k) out[li * kLevelChannels + size_t(k)] = acc[k];
+  }
+}
+
+void FeaturePyramid::scatter_gradients(const GradientSlabs& slabs, const std::vector<float>& pos,
+                                       const std::vector<int16_t>& micro, const std::vector<float>& d_feat) {
+  const int F = channels();
+  const int n_slabs = slabs.slabs();
+  const int H = slabs.slab_micro;
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int j = 0; j < n_slabs; ++j) {
+    for (size_t li = 0; li < levels_.size(); ++li) {
+      PyramidLevel& L = levels_[li];
+      auto& list = L.adam.touched_list[size_t(j)];
+      const float inv = 1.f / float(1 << L.shift);
+      // The vertex z layers this slab owns: those whose micro z lies in the slab
+      // (the last layer, at micro_res, belongs to the last slab).
+      const int vz_lo = (j * H) >> L.shift;
+      const int vz_hi = j + 1 == n_slabs ? L.res : (((j + 1) * H) >> L.shift) - 1;
+      // The samples of the previous slab and of this one, merged by id: every
+      // vertex sums its contributions in sample order, as a serial loop would.
+      int32_t ia = j > 0 ? slabs.begin[size_t(j - 1)] : slabs.begin[size_t(j)];
+      const int32_t ea = slabs.begin[size_t(j)];
+      int32_t ib = slabs.begin[size_t(j)];
+      const int32_t eb = slabs.begin[size_t(j) + 1];
+      {
+        while (ia < ea || ib < eb) {
+          const bool take_a = ib >= eb || (ia < ea && slabs.samples[size_t(ia)] < slabs.samples[size_t(ib)]);
+          const size_t s = size_t(take_a ? slabs.samples[size_t(ia++)] : slabs.samples[size_t(ib++)]);
+          const int cx = micro[3 * s] >> L.shift, cy = micro[3 * s + 1] >> L.shift, cz = micro[3 * s + 2] >> L.shift;
+          float w[8];
+          trilinear_weights(pos[3 * s] * inv - float(cx), pos[3 * s + 1] * inv - float(cy),
+                            pos[3 * s + 2] * inv - float(cz), w);
+          const float* g = &d_feat[s * size_t(F) + li * kLevelChannels];
+          for (int dz = 0; dz < 2; ++dz) {
+            const int vz = cz + dz;
+            if (vz < vz_lo || vz > vz_hi) continue;
+            for (int c = 4 * dz; c < 4 * dz + 4; ++c) {
+              const size_t vtx = L.vertex_index(cx + (c & 1), cy + ((c >> 1) & 1), vz);
+              float* gv = &L.adam.grad[vtx * kLevelChannels];
+              for (int k = 0; k < kLevelChannels; ++k) gv[k] += w[c] * g[k];
+              if (!L.adam.touched[vtx]) {
+                L.adam.touched[vtx] = 1;
+                list.push_back(int32_t(vtx));
+              }
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
+void FeaturePyramid::add_tv_gradient(float weight) {
+  if (!(weight > 0.f) || levels_.empty()) return;
+  PyramidLevel& L = levels_.back();
+  const int n = L.res + 1;
+  const int n_lists = int(L.adam.touched_list.size());
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int j = 0; j < n_lists; ++j) {
+    for (int32_t vtx : L.adam.touched_list[size_t(j)]) {
+      const int x = vtx % n, y = (vtx / n) % n, z = vtx / (n * n);
+      const float* v = &L.value[size_t(vtx) * kLevelChannels];
+      float* g = &L.adam.grad[size_t(vtx) * kLevelChannels];
+      const int coord[3] = {x, y, z};
+      const int64_t stride[3] = {1, n, int64_t(n) * n};
+      for (int a = 0; a < 3; ++a)
+        for (int s = -1; s <= 1; s += 2) {
+          const int c = coord[a] + s;
+          if (c < 0 || c >= n) continue;
+          const float* u = &L.value[size_t(vtx + s * stride[a]) * kLevelChannels];
+          for (int k = 0; k < kLevelChannels; ++k) g[k] += 2.f * weight * (v[k] - u[k]);
+        }
+    }
+  }
+}
+
+void FeaturePyramid::adam_step(const AdamStep& step) {
+  for (auto& L : levels_) {
+    const int n_lists = int(L.adam.touched_list.size());
+#pragma omp parallel for schedule(dynamic, 1)
+    for (int j = 0; j < n_lists; ++j) {
+      auto& list = L.adam.touched_list[size_t(j)];
+      for (int32_t vtx : list) {
+        for (int k = 0; k < kLevelChannels; ++k) {
+          const size_t i = size_t(vtx) * kLevelChannels + size_t(k);
+          step.update(L.value[i], L.adam.m[i], L.adam.v[i], L.adam.grad[i]);
+          L.adam.grad[i] = 0.f;
+        }
+        L.adam.touched[size_t(vtx)] = 0;
+      }
+      list.clear();
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------
+// INT4
+
+int Int4Channel::quantize(float x) const {
+  // Round half to even by the 1.5 * 2^23 trick (exact for |t| < 2^22, and t is
+  // clamped far inside that), the same as nearbyint without a library call.
+  const float t = std::clamp(x * inv_scale, -64.f, 64.f);
+  const float r = (t + 12582912.f) - 12582912.f;
+  return int(std::clamp(r + float(zero_point), 0.f, 15.f));
+}
+
+Int4Channel int4_channel_for_range(float lo, float hi) {
+  lo = std::min(lo, 0.f);
+  hi = std::max(hi, 0.f);
+  Int4Channel q;
+  q.scale = (hi - lo) / 15.f;
+  if (!(q.scale > 0.f) || !std::isfinite(q.scale)) q.scale = 1.f;
+  q.inv_scale = 1.f / q.scale;
+  q.zero_point = std::clamp(int(std::nearbyint(-lo * q.inv_scale)), 0, 15);
+  return q;
+}
+
+// ---------------------------------------------------------------------------
+// BlockFeatures
+
+BlockFeatures::BlockFeatures(int micro_res, int channels, std::vector<uint32_t> fine_index, std::vector<float> values)
+    : micro_res_(micro_res), channels_(channels), fine_index_(std::move(fine_index)), value_(std::move(values)) {
+  const int fr = micro_res / kMicroPerFine;
+  if (value_.size() != fine_index_.size() * kBlockVerts * size_t(channels))
+    fail("block features: {} values for {} blocks of {} channels", value_.size(), fine_index_.size(), channels);
+  fine_to_block_.assign(size_t(fr) * fr * fr, -1);
+  for (size_t b = 0; b < fine_index_.size(); ++b) {
+    if (fine_index_[b] >= fine_to_block_.size() || (b && fine_index_[b] <= fine_index_[b - 1]))
+      fail("block features: fine indices must be ascending and inside the grid");
+    fine_to_block_[fine_index_[b]] = int32_t(b);
+  }
+  adam_.resize(fine_index_.size() * kBlockVerts, channels, fr);
+}
+
+std::vector<Int4Channel> BlockFeatures::fit_quantization() const {
+  const size_t F = size_t(channels_);
+  const size_t n = value_.size() / F;
+  std::vector<float> lo(F, 0.f), hi(F, 0.f);
+  for (size_t v = 0; v < n; ++v)
+    for (size_t c = 0; c < F; ++c) {
+      lo[c] = std::min(lo[c], value_[v * F + c]);
+      hi[c] = std::max(hi[c], value_[v * F + c]);
+    }
+  std::vector<Int4Channel> q(F);
+  for (size_t c = 0; c < F; ++c) q[c] = int4_channel_for_range(lo[c], hi[c]);
+  return q;
+}
+
+namespace {
+// Vertex ids (x fastest in the 5^3 block) of the 8 corners of micro voxel m, dx fastest.
+inline void block_corners(const Vec3i& m, int vid[8]) {
+  const int lx = m.x & 3, ly = m.y & 3, lz = m.z & 3;
+  const int base = lx + kBlockVertsPerAxis * (ly + kBlockVertsPerAxis * lz);
+  const int off[8] = {0, 1, 5, 6, 25, 26, 30, 31};
+  for (int c = 0; c < 8; ++c) vid[c] = base + off[c];
+}
+}  // namespace
+
+bool BlockFeatures::interpolate(const Vec3f& p, const Vec3i& m, float* out) const {
+  const int F = channels_;
+  const int fr = micro_res_ / kMicroPerFine;
+  const int32_t b = fine_to_block_[linear_index(m.x >> 2, m.y >> 2, m.z >> 2, fr)];
+  if (b < 0) {
+    std::fill(out, out + F, 0.f);
+    return false;
+  }
+  int vid[8];
+  block_corners(m, vid);
+  float w[8];
+  trilinear_weights(p.x - float(m.x), p.y - float(m.y), p.z - float(m.z), w);
+  std::fill(out, out + F, 0.f);
+  const float* base = &value_[size_t(b) * kBlockVerts * size_t(F)];
+  for (int c = 0; c < 8; ++c) {
+    const float* v = base + size_t(vid[c]) * size_t(F);
+    if (quant_.empty()) {
+      for (int k = 0; k < F; ++k) out[k] += w[c] * v[k];
+    } else {
+      for (int k = 0; k < F; ++k) out[k] += w[c] * quant_[size_t(k)].fake(v[k]);
+    }
+  }
+  return true;
+}
+
+void BlockFeatures::scatter_gradients(const GradientSlabs& slabs, const std::vector<float>& pos,
+                                      const std::vector<int16_t>& micro, const std::vector<float>& d_feat) {
+  const int F = channels_;
+  const int fr = micro_res_ / kMicroPerFine;
+  if (slabs.slab_micro != kMicroPerFine) fail("block features: gradient slabs must be one fine voxel high");
+  const int n_slabs = slabs.slabs();
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int j = 0; j < n_slabs; ++j) {
+    auto& list = adam_.touched_list[size_t(j)];
+    for (int32_t i = slabs.begin[size_t(j)]; i < slabs.begin[size_t(j) + 1]; ++i) {
+      const size_t s = size_t(slabs.samples[size_t(i)]);
+      const Vec3i m{micro[3 * s], micro[3 * s + 1], micro[3 * s + 2]};
+      const int32_t b = fine_to_block_[linear_index(m.x >> 2, m.y >> 2, m.z >> 2, fr)];
+      if (b < 0) continue;
+      int vid[8];
+      block_corners(m, vid);
+      float w[8];
+      trilinear_weights(pos[3 * s] - float(m.x), pos[3 * s + 1] - float(m.y), pos[3 * s + 2] - float(m.z), w);
+      const float* g = &d_feat[s * size_t(F)];
+      for (int c = 0; c < 8; ++c) {
+        const size_t vtx = size_t(b) * kBlockVerts + size_t(vid[c]);
+        float* gv = &adam_.grad[vtx * size_t(F)];
+        for (int k = 0; k < F; ++k) gv[k] += w[c] * g[k];
+        if (!adam_.touched[vtx]) {
+          adam_.touched[vtx] = 1;
+          list.push_back(int32_t(vtx));
+        }
+      }
+    }
+  }
+}
+
+void BlockFeatures::adam_step(const AdamStep& step) {
+  const size_t F = size_t(channels_);
+  const int n_lists = int(adam_.touched_list.size());
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int j = 0; j < n_lists; ++j) {
+    auto& list = adam_.touched_list[size_t(j)];
+    for (int32_t vtx : list) {
+      for (size_t k = 0; k < F; ++k) {
+        const size_t i = size_t(vtx) * F + k;
+        step.update(value_[i], adam_.m[i], adam_.v[i], adam_.grad[i]);
+        adam_.grad[i] = 0.f;
+      }
+      adam_.touched[size_t(vtx)] = 0;
+    }
+    list.clear();
+  }
+}
+
+}  // namespace edrnr::train

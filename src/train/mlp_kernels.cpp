@@ -1,0 +1,267 @@
+#include "train/mlp_kernels.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/error.h"
+#include "train/rng.h"
+
+#pragma GCC diagnostic ignored "-Wpsabi"
+
+namespace edrnr::train {
+namespace {
+
+// Eight lanes; GCC lowers it to SSE2 pairs or one AVX2 register.
+typedef float v8f __attribute__((vector_size(32)));
+constexpr int kVecs = kLanes / 8;
+
+#define EDRNR_CLONES __attribute__((target_clones("avx2", "default")))
+
+inline v8f splat(float x) { return v8f{x, x, x, x, x, x, x, x}; }
+inline v8f load8(const float* p) {
+  v8f v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+inline void store8(float* p, v8f v) { __builtin_memcpy(p, &v, sizeof v); }
+// Fixed pairwise order, the same on every instruction set.
+inline float hsum8(v8f v) { return ((v[0] + v[1]) + (v[2] + v[3])) + ((v[4] + v[5]) + (v[6] + v[7])); }
+
+}  // namespace
+
+MlpLayout::MlpLayout(const MlpArch& a) : arch(a) {
+  const auto& dw = arch.density_widths;
+  const auto& cw = arch.color_widths;
+  if (dw.size() < 2 || cw.size() < 2) fail("MLP shape: density and colour nets need at least one layer each");
+  if (cw.front() != dw.back() + arch.dir_dims())
+    fail("MLP shape: colour net input {} is not density output {} + direction encoding {}", cw.front(), dw.back(),
+         arch.dir_dims());
+  if (cw.back() != 3) fail("MLP shape: colour net output is {}, not 3", cw.back());
+  size_t off = 0;
+  auto add = [&](const std::vector<int>& widths, std::vector<Layer>& out, int& act_floats) {
+    for (size_t i = 1; i < widths.size(); ++i) {
+      if (widths[i - 1] <= 0 || widths[i] <= 0) fail("MLP shape: layer widths must be positive");
+      Layer l;
+      l.in = widths[i - 1];
+      l.out = widths[i];
+      l.w = off;
+      off += size_t(l.in) * size_t(l.out);
+      l.b = off;
+      off += size_t(l.out);
+      act_floats += l.out;
+      max_width = std::max({max_width, l.in, l.out});
+      out.push_back(l);
+    }
+  };
+  add(dw, density, density_act_floats);
+  add(cw, color, color_act_floats);
+  param_count = off;
+}
+
+std::vector<float> flatten_mlp(const MlpLayout& layout, const MlpF& mlp) {
+  std::vector<float> p(layout.param_count);
+  auto put = [&](const std::vector<MlpLayout::Layer>& ls, const std::vector<DenseF>& ds) {
+    if (ls.size() != ds.size()) fail("MLP has {} layers, expected {}", ds.size(), ls.size());
+    for (size_t i = 0; i < ls.size(); ++i) {
+      if (ds[i].in != ls[i].in || ds[i].out != ls[i].out || ds[i].w.size() != size_t(ls[i].in) * ls[i].out ||
+          ds[i].b.size() != size_t(ls[i].out))
+        fail("MLP layer {} has shape {}x{}, expected {}x{}", i, ds[i].out, ds[i].in, ls[i].out, ls[i].in);
+      std::copy(ds[i].w.begin(), ds[i].w.end(), p.begin() + ptrdiff_t(ls[i].w));
+      std::copy(ds[i].b.begin(), ds[i].b.end(), p.begin() + ptrdiff_t(ls[i].b));
+    }
+  };
+  put(layout.density, mlp.density);
+  put(layout.color, mlp.color);
+  return p;
+}
+
+MlpF unflatten_mlp(const MlpLayout& layout, const float* params) {
+  MlpF m;
+  auto get = [&](const std::vector<MlpLayout::Layer>& ls, std::vector<DenseF>& ds) {
+    for (const auto& l : ls) {
+      DenseF d;
+      d.in = l.in;
+      d.out = l.out;
+      d.w.assign(params + l.w, params + l.w + size_t(l.in) * l.out);
+      d.b.assign(params + l.b, params + l.b + l.out);
+      ds.push_back(std::move(d));
+    }
+  };
+  get(layout.density, m.density);
+  get(layout.color, m.color);
+  return m;
+}
+
+void init_mlp_params(const MlpLayout& layout, uint64_t seed, float* params) {
+  std::fill(params, params + layout.param_count, 0.f);
+  auto init = [&](const std::vector<MlpLayout::Layer>& ls, uint64_t net) {
+    for (size_t li = 0; li < ls.size(); ++li) {
+      const auto& l = ls[li];
+      bool output = li + 1 == ls.size();
+      float a = std::sqrt((output ? 3.f : 6.f) / float(l.in));
+      for (size_t i = 0; i < size_t(l.in) * l.out; ++i) {
+        uint64_t h = hash3(hash_combine(seed, uint64_t(RngStream::MlpInit)), net * 64 + li, i);
+        params[l.w + i] = (2.f * uniform01(h) - 1.f) * a;
+      }
+    }
+  };
+  init(layout.density, 0);
+  init(layout.color, 1);
+}
+
+float int8_row_scale(const float* row, int n) {
+  float m = 0.f;
+  for (int i = 0; i < n; ++i) m = std::max(m, std::fabs(row[i]));
+  return m > 0.f ? m / 127.f : 1.f;
+}
+
+int8_t int8_quantize(float w, float scale) {
+  float q = std::nearbyint(w / scale);
+  return int8_t(std::clamp(q, -127.f, 127.f));
+}
+
+void fake_quantize_mlp(const MlpLayout& layout, const float* params, float* out) {
+  std::copy(params, params + layout.param_count, out);
+  for (const auto* ls : {&layout.density, &layout.color})
+    for (const auto& l : *ls)
+      for (int o = 0; o < l.out; ++o) {
+        const float* row = params + l.w + size_t(o) * l.in;
+        float s = int8_row_scale(row, l.in);
+        for (int i = 0; i < l.in; ++i) out[l.w + size_t(o) * l.in + i] = float(int8_quantize(row[i], s)) * s;
+      }
+}
+
+MlpQ quantize_mlp(const MlpLayout& layout, const float* params, const std::vector<float>& layer_in_max_abs) {
+  MlpQ q;
+  size_t layer_index = 0;
+  auto quant = [&](const std::vector<MlpLayout::Layer>& ls, std::vector<DenseQ>& ds) {
+    for (const auto& l : ls) {
+      DenseQ d;
+      d.in = l.in;
+      d.out = l.out;
+      d.w.resize(size_t(l.in) * l.out);
+      d.w_scale.resize(size_t(l.out));
+      for (int o = 0; o < l.out; ++o) {
+        const float* row = params + l.w + size_t(o) * l.in;
+        float s = int8_row_scale(row, l.in);
+        d.w_scale[size_t(o)] = s;
+        for (int i = 0; i < l.in; ++i) d.w[size_t(o) * l.in + i] = int8_quantize(row[i], s);
+      }
+      d.b.assign(params + l.b, params + l.b + l.out);
+      float m = layer_index < layer_in_max_abs.size() ? layer_in_max_abs[layer_index] : 0.f;
+      d.in_scale = m > 0.f ? m / 127.f : 1.f;
+      ++layer_index;
+      ds.push_back(std::move(d));
+    }
+  };
+  quant(layout.density, q.density);
+  quant(layout.color, q.color);
+  return q;
+}
+
+namespace {
+
+// y[o][:] = b[o] + sum_i W[o][i] x[i][:], inputs summed in index order.
+EDRNR_CLONES void layer_forward(const float* W, const float* b, int in, int out, const float* x, float* y, bool relu) {
+  const v8f zero = splat(0.f);
+  for (int o = 0; o < out; ++o) {
+    const float* w = W + size_t(o) * in;
+    v8f a[kVecs];
+    for (int v = 0; v < kVecs; ++v) a[v] = splat(b[o]);
+    for (int i = 0; i < in; ++i) {
+      v8f wi = splat(w[i]);
+      const float* xi = x + size_t(i) * kLanes;
+      for (int v = 0; v < kVecs; ++v) a[v] += wi * load8(xi + 8 * v);
+    }
+    for (int v = 0; v < kVecs; ++v) {
+      if (relu) a[v] = a[v] > zero ? a[v] : zero;
+      store8(y + size_t(o) * kLanes + 8 * v, a[v]);
+    }
+  }
+}
+
+// Parameter gradients of one layer: gW[o][i] += sum_lanes dy[o] x[i], gb[o] += sum_lanes dy[o].
+EDRNR_CLONES void layer_param_grad(const float* x, const float* dy, int in, int out, float* gW, float* gb) {
+  for (int o = 0; o < out; ++o) {
+    const float* d = dy + size_t(o) * kLanes;
+    v8f dv[kVecs];
+    for (int v = 0; v < kVecs; ++v) dv[v] = load8(d + 8 * v);
+    v8f s = dv[0];
+    for (int v = 1; v < kVecs; ++v) s += dv[v];
+    gb[o] += hsum8(s);
+    for (int i = 0; i < in; ++i) {
+      const float* xi = x + size_t(i) * kLanes;
+      v8f acc = dv[0] * load8(xi);
+      for (int v = 1; v < kVecs; ++v) acc += dv[v] * load8(xi + 8 * v);
+      gW[size_t(o) * in + i] += hsum8(acc);
+    }
+  }
+}
+
+// dx[i][:] = sum_o W[o][i] dy[o][:] (outputs in index order); with mask, lanes
+// where mask[i] <= 0 (an inactive ReLU) are zeroed.
+EDRNR_CLONES void layer_input_grad(const float* W, int in, int out, const float* dy, const float* mask, float* dx) {
+  const v8f zero = splat(0.f);
+  for (int i = 0; i < in; ++i) {
+    v8f a[kVecs];
+    for (int v = 0; v < kVecs; ++v) a[v] = zero;
+    for (int o = 0; o < out; ++o) {
+      v8f wi = splat(W[size_t(o) * in + i]);
+      const float* d = dy + size_t(o) * kLanes;
+      for (int v = 0; v < kVecs; ++v) a[v] += wi * load8(d + 8 * v);
+    }
+    for (int v = 0; v < kVecs; ++v) {
+      if (mask) a[v] = load8(mask + size_t(i) * kLanes + 8 * v) > zero ? a[v] : zero;
+      store8(dx + size_t(i) * kLanes + 8 * v, a[v]);
+    }
+  }
+}
+
+}  // namespace
+
+void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, float* acts) {
+  const float* x = x0;
+  float* y = acts;
+  for (size_t k = 0; k < layers.size(); ++k) {
+    const auto& l = layers[k];
+    layer_forward(params + l.w, params + l.b, l.in, l.out, x, y, k + 1 < layers.size());
+    x = y;
+    y += size_t(l.out) * kLanes;
+  }
+}
+
+void net_backward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, const float* acts,
+                  const float* d_last, float* grad, float* d_x0, float* scratch) {
+  const int n = int(layers.size());
+  // Offsets of each layer's output inside acts.
+  std::vector<size_t> act_off(size_t(n), 0);
+  for (int k = 1; k < n; ++k) act_off[size_t(k)] = act_off[size_t(k - 1)] + size_t(layers[size_t(k - 1)].out) * kLanes;
+  const float* dy = d_last;
+  float* bufs[2] = {scratch, nullptr};
+  int max_w = 0;
+  for (const auto& l : layers) max_w = std::max({max_w, l.in, l.out});
+  bufs[1] = scratch + size_t(max_w) * kLanes;
+  int cur = 0;
+  for (int k = n - 1; k >= 0; --k) {
+    const auto& l = layers[size_t(k)];
+    const float* x = k == 0 ? x0 : acts + act_off[size_t(k - 1)];
+    layer_param_grad(x, dy, l.in, l.out, grad + l.w, grad + l.b);
+    if (k > 0) {
+      float* dx = bufs[cur];
+      layer_input_grad(params + l.w, l.in, l.out, dy, x, dx);
+      dy = dx;
+      cur ^= 1;
+    } else if (d_x0) {
+      layer_input_grad(params + l.w, l.in, l.out, dy, nullptr, d_x0);
+    }
+  }
+}
+
+float block_max_abs(const float* block, int rows, int n) {
+  float m = 0.f;
+  for (int r = 0; r < rows; ++r)
+    for (int l = 0; l < n; ++l) m = std::max(m, std::fabs(block[size_t(r) * kLanes + l]));
+  return m;
+}
+
+}  // namespace edrnr::train

@@ -1,0 +1,81 @@
+#pragma once
+// Batched forward and backward passes of the per-CV MLP (scene_model.h) for
+// training. Samples are processed in chunks of kLanes; every activation block
+// is neuron-major ([neuron][lane]) so that the inner loops run across lanes
+// and vectorize. Lanes past the chunk's sample count are padding: their
+// inputs should be zero and their output gradients must be zero, so they add
+// nothing to any parameter gradient.
+//
+// Determinism: every sum runs in a fixed order (inputs in index order, lanes
+// in a fixed pairwise tree), and lane arithmetic is element-wise, so the
+// results are the same bits whichever instruction set the runtime dispatch
+// picks (SSE2 or AVX2).
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "model/scene_model.h"
+
+namespace edrnr::train {
+
+inline constexpr int kLanes = 32;
+
+// Where each layer's weights (row-major [out][in]) and biases sit in one flat
+// parameter vector: density layers first, then colour layers.
+struct MlpLayout {
+  struct Layer {
+    int in = 0, out = 0;
+    size_t w = 0, b = 0;  // offsets into the parameter vector
+  };
+  MlpArch arch;
+  std::vector<Layer> density, color;
+  size_t param_count = 0;
+  int density_act_floats = 0;  // sum of density layer widths: activation floats per lane
+  int color_act_floats = 0;    // the same for the colour net
+  int max_width = 0;           // widest layer input or output
+
+  // Throws Error unless the colour net's input is geo outputs + direction encoding.
+  explicit MlpLayout(const MlpArch& arch);
+  int feature_dims() const { return arch.feature_channels(); }
+  int geo_dims() const { return arch.geo_width(); }
+  int dir_dims() const { return arch.dir_dims(); }
+};
+
+// Float MLP <-> flat parameters.
+std::vector<float> flatten_mlp(const MlpLayout& layout, const MlpF& mlp);
+MlpF unflatten_mlp(const MlpLayout& layout, const float* params);
+
+// Fresh parameters: uniform weights in +-sqrt(6 / in) for layers followed by a
+// ReLU and +-sqrt(3 / in) for output layers, zero biases. Deterministic in seed.
+void init_mlp_params(const MlpLayout& layout, uint64_t seed, float* params);
+
+// INT8 weight quantization, per output row, symmetric: scale = max|row| / 127
+// (1 for an all-zero row), q = clamp(round(w / scale), -127, 127).
+float int8_row_scale(const float* row, int n);
+int8_t int8_quantize(float w, float scale);
+
+// Writes the parameters a quantized MLP stands for (weights q * scale, biases
+// unchanged): the forward weights of quantization-aware training.
+void fake_quantize_mlp(const MlpLayout& layout, const float* params, float* out);
+
+// The INT8 MLP. layer_in_max_abs holds, per layer (density then colour), the
+// largest |input| seen; in_scale = that / 127 (1 when zero).
+MlpQ quantize_mlp(const MlpLayout& layout, const float* params, const std::vector<float>& layer_in_max_abs);
+
+// Forward pass of one net (`layers` = layout.density or layout.color) over a
+// chunk. x0: [layers[0].in][kLanes]. acts: every layer's output in turn
+// ([out][kLanes] each; hidden layers after ReLU, the last layer linear).
+void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, float* acts);
+
+// Backward pass of one net over a chunk. d_last: [last out][kLanes], the loss
+// gradient with respect to the last layer's (linear) output. Adds parameter
+// gradients into grad (same layout as params). If d_x0 is not null it
+// receives [layers[0].in][kLanes], the gradient with respect to x0. scratch
+// holds 2 * max_width * kLanes floats.
+void net_backward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, const float* acts,
+                  const float* d_last, float* grad, float* d_x0, float* scratch);
+
+// Largest |value| of rows x kLanes values, over the first n lanes.
+float block_max_abs(const float* block, int rows, int n);
+
+}  // namespace edrnr::train

@@ -1,0 +1,120 @@
+#include "train/occupancy.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace edrnr::train {
+
+OccupancyGrid::OccupancyGrid(int micro_res)
+    : res(micro_res),
+      density(size_t(micro_res) * micro_res * micro_res, -1.f),
+      micro(micro_res),
+      macro(micro_res / kMacroCell) {
+  rebuild(0.f);
+}
+
+double OccupancyGrid::mean_density() const {
+  double sum = 0;
+  size_t n = 0;
+  for (float d : density)
+    if (d >= 0.f) {
+      sum += d;
+      ++n;
+    }
+  return n ? sum / double(n) : 0.0;
+}
+
+void OccupancyGrid::rebuild(float threshold) {
+  micro = Bitmap3(res);
+  auto& words = micro.words();
+  const int n_words = int(words.size());
+  // Words hold 64 consecutive x (res is a multiple of 32; 64 | res^3), so each
+  // word is owned by one thread.
+#pragma omp parallel for schedule(static)
+  for (int wi = 0; wi < n_words; ++wi) {
+    uint64_t w = 0;
+    for (int b = 0; b < 64; ++b) {
+      const size_t i = size_t(wi) * 64 + size_t(b);
+      const float d = density[i];
+      if (!(d < 0.f || d > threshold)) continue;
+      if (aabb_known) {
+        const int x = int(i % size_t(res)), y = int((i / size_t(res)) % size_t(res)), z = int(i / (size_t(res) * res));
+        if (x < aabb_lo.x || y < aabb_lo.y || z < aabb_lo.z || x > aabb_hi.x || y > aabb_hi.y || z > aabb_hi.z)
+          continue;
+      }
+      w |= uint64_t(1) << b;
+    }
+    words[size_t(wi)] = w;
+  }
+  rebuild_macro();
+}
+
+void OccupancyGrid::rebuild_macro() {
+  macro = Bitmap3(res / kMacroCell);
+  const auto& words = micro.words();
+  // A word holds 64 consecutive x of one row (res is a multiple of 32, so a
+  // word may hold two rows when res == 32).
+  for (size_t wi = 0; wi < words.size(); ++wi) {
+    uint64_t w = words[wi];
+    while (w) {
+      const size_t i = wi * 64 + size_t(__builtin_ctzll(w));
+      w &= w - 1;
+      const int x = int(i % size_t(res)), y = int((i / size_t(res)) % size_t(res)), z = int(i / (size_t(res) * res));
+      macro.set(x / kMacroCell, y / kMacroCell, z / kMacroCell);
+    }
+  }
+}
+
+bool OccupancyGrid::update_aabb(float threshold, float filter_sigma, float keep) {
+  std::vector<float> occ(density.size());
+  for (size_t i = 0; i < density.size(); ++i) occ[i] = (density[i] < 0.f || density[i] > threshold) ? 1.f : 0.f;
+  std::vector<float> f = filter_sigma > 0.f ? gaussian_filter3(occ, res, filter_sigma) : std::move(occ);
+  Vec3i lo{res, res, res}, hi{-1, -1, -1};
+  for (int z = 0; z < res; ++z)
+    for (int y = 0; y < res; ++y)
+      for (int x = 0; x < res; ++x)
+        if (f[micro.index(x, y, z)] >= keep) {
+          lo = vmin(lo, Vec3i{x, y, z});
+          hi = vmax(hi, Vec3i{x, y, z});
+        }
+  if (hi.x < 0) return false;
+  aabb_known = true;
+  aabb_lo = lo;
+  aabb_hi = hi;
+  return true;
+}
+
+std::vector<float> gaussian_filter3(const std::vector<float>& grid, int res, float sigma_voxels) {
+  const int radius = std::max(1, int(std::ceil(3.f * sigma_voxels)));
+  std::vector<float> k(size_t(2 * radius + 1));
+  float sum = 0.f;
+  for (int i = -radius; i <= radius; ++i) {
+    k[size_t(i + radius)] = std::exp(-0.5f * float(i * i) / (sigma_voxels * sigma_voxels));
+    sum += k[size_t(i + radius)];
+  }
+  for (float& v : k) v /= sum;
+  std::vector<float> a = grid, b(grid.size());
+  const size_t R = size_t(res);
+  const size_t stride[3] = {1, R, R * R};
+  for (int axis = 0; axis < 3; ++axis) {
+    const size_t s = stride[axis];
+#pragma omp parallel for schedule(static)
+    for (int z = 0; z < res; ++z)
+      for (int y = 0; y < res; ++y)
+        for (int x = 0; x < res; ++x) {
+          const int c[3] = {x, y, z};
+          const size_t i = size_t(x) + R * (size_t(y) + R * size_t(z));
+          float acc = 0.f;
+          for (int t = -radius; t <= radius; ++t) {
+            const int u = c[axis] + t;
+            if (u < 0 || u >= res) continue;
+            acc += k[size_t(t + radius)] * a[size_t(int64_t(i) + int64_t(t) * int64_t(s))];
+          }
+          b[i] = acc;
+        }
+    std::swap(a, b);
+  }
+  return a;
+}
+
+}  // namespace edrnr::train

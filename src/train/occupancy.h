@@ -1,0 +1,50 @@
+#pragma once
+// The training-time occupancy grid at the micro resolution (Instant-NGP /
+// nerfacc style): a decayed running maximum of the density per micro voxel,
+// refreshed a part at a time, thresholded into the micro bitmap; plus the
+// object AABB taken from the Gaussian-filtered occupancy, outside which
+// nothing is occupied.
+#include <cstdint>
+#include <vector>
+
+#include "core/vec.h"
+#include "model/scene_model.h"
+
+namespace edrnr::train {
+
+inline constexpr int kSweepParts = 8;  // cells are refreshed in 8 interleaved parts (coordinate parities)
+inline constexpr int kMacroCell = 8;   // micro voxels per macro cell edge (fast empty-space skipping)
+
+struct OccupancyGrid {
+  int res = 0;
+  std::vector<float> density;  // running max of sigma per micro voxel; < 0: not evaluated yet
+  Bitmap3 micro;               // occupancy, res^3
+  Bitmap3 macro;               // OR of kMacroCell^3 micro voxels
+  bool aabb_known = false;
+  Vec3i aabb_lo{0, 0, 0}, aabb_hi{0, 0, 0};  // inclusive micro voxel bounds of the object AABB
+
+  explicit OccupancyGrid(int micro_res = 0);
+
+  bool occupied(int x, int y, int z) const { return micro.get(x, y, z); }
+  bool macro_occupied(int x, int y, int z) const { return macro.get(x / kMacroCell, y / kMacroCell, z / kMacroCell); }
+  // Micro voxels in sweep part p, in linear (x fastest) order.
+  static bool in_part(int x, int y, int z, int part) { return ((x & 1) | ((y & 1) << 1) | ((z & 1) << 2)) == part; }
+
+  // Mean density over evaluated voxels.
+  double mean_density() const;
+  // Rebuilds micro and macro bitmaps: occupied iff not yet evaluated or
+  // density > threshold, and inside the AABB when it is known.
+  void rebuild(float threshold);
+  // Rebuilds the macro bitmap from the micro bitmap.
+  void rebuild_macro();
+  // Recomputes the AABB from the occupancy (density > threshold or not yet
+  // evaluated, ignoring the current AABB) filtered by a Gaussian of
+  // filter_sigma voxels, keeping voxels whose filtered value >= keep. Returns
+  // false (AABB unchanged) if nothing is kept.
+  bool update_aabb(float threshold, float filter_sigma, float keep);
+};
+
+// Separable Gaussian filter of a res^3 grid (x fastest), zero outside.
+std::vector<float> gaussian_filter3(const std::vector<float>& grid, int res, float sigma_voxels);
+
+}  // namespace edrnr::train

@@ -1,0 +1,451 @@
+// Every backward kernel of the trainer against central finite differences,
+// and the forward kernels against closed forms.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "train/feature_grid.h"
+#include "train/mlp_kernels.h"
+#include "train/rng.h"
+#include "train/volume.h"
+
+namespace edrnr::train {
+namespace {
+
+float rnd(uint64_t seed, uint64_t i, float lo, float hi) { return lo + (hi - lo) * uniform01(hash3(seed, 99, i)); }
+
+MlpArch small_arch() {
+  MlpArch a;
+  a.density_widths = {8, 12, 5};
+  a.dir_frequencies = 1;
+  a.color_widths = {5 + 9, 10, 7, 3};
+  return a;
+}
+
+// Loss = sum over lanes < n and outputs of r * out (r random): its gradient
+// with respect to the outputs is r.
+struct NetCase {
+  const std::vector<MlpLayout::Layer>* layers;
+  std::vector<float> params, x0, r;
+  int n;
+  int out_rows() const { return layers->back().out; }
+  size_t act_floats() const {
+    size_t s = 0;
+    for (const auto& l : *layers) s += size_t(l.out);
+    return s * kLanes;
+  }
+  double loss() const {
+    std::vector<float> acts(act_floats());
+    net_forward(*layers, params.data(), x0.data(), acts.data());
+    const float* out = acts.data() + acts.size() - size_t(out_rows()) * kLanes;
+    double L = 0;
+    for (int o = 0; o < out_rows(); ++o)
+      for (int l = 0; l < n; ++l) L += double(r[size_t(o) * kLanes + l]) * out[size_t(o) * kLanes + l];
+    return L;
+  }
+};
+
+// A ReLU switching inside [x - h, x + h] makes the two one-sided slopes differ;
+// the central difference is then no reference for the derivative.
+bool crosses_kink(double up, double down, float h) {
+  return std::fabs(up - down) / h > 1e-3 * (1.0 + std::fabs(up / h));
+}
+
+void check_net(const MlpLayout& layout, const std::vector<MlpLayout::Layer>& layers, uint64_t seed) {
+  NetCase c;
+  c.layers = &layers;
+  c.n = 21;  // leaves padding lanes
+  c.params.resize(layout.param_count);
+  init_mlp_params(layout, seed, c.params.data());
+  for (size_t i = 0; i < c.params.size(); ++i) c.params[i] += rnd(seed, 1000 + i, -0.1f, 0.1f);  // non-zero biases
+  c.x0.assign(size_t(layers[0].in) * kLanes, 0.f);
+  for (int i = 0; i < layers[0].in; ++i)
+    for (int l = 0; l < c.n; ++l) c.x0[size_t(i) * kLanes + l] = rnd(seed, 5000 + i * 64 + l, -1.f, 1.f);
+  c.r.assign(size_t(c.out_rows()) * kLanes, 0.f);
+  for (int o = 0; o < c.out_rows(); ++o)
+    for (int l = 0; l < c.n; ++l) c.r[size_t(o) * kLanes + l] = rnd(seed, 9000 + o * 64 + l, -1.f, 1.f);
+
+  std::vector<float> acts(c.act_floats()), grad(layout.param_count, 0.f), dx(size_t(layers[0].in) * kLanes);
+  std::vector<float> scratch(2 * size_t(layout.max_width) * kLanes);
+  net_forward(layers, c.params.data(), c.x0.data(), acts.data());
+  net_backward(layers, c.params.data(), c.x0.data(), acts.data(), c.r.data(), grad.data(), dx.data(), scratch.data());
+
+  const float h = 4e-3f;
+  int checked = 0, kinks = 0;
+  for (const auto& l : layers)
+    for (size_t k = l.w; k < l.b + size_t(l.out); ++k) {
+      NetCase p = c, m = c;
+      p.params[k] += h;
+      m.params[k] -= h;
+      const double l0 = c.loss(), lp = p.loss(), lm = m.loss();
+      if (crosses_kink(lp - l0, l0 - lm, h)) {
+        ++kinks;
+        continue;
+      }
+      const double fd = (lp - lm) / (2.0 * h);
+      EXPECT_NEAR(grad[k], fd, 2e-3 * (1.0 + std::fabs(fd))) << "parameter " << k;
+      ++checked;
+    }
+  EXPECT_GT(checked, 100);
+  for (int i = 0; i < layers[0].in; ++i)
+    for (int l = 0; l < kLanes; ++l) {
+      const size_t k = size_t(i) * kLanes + l;
+      if (l >= c.n) {
+        continue;  // padding lanes carry no gradient to parameters; their input gradient is unused
+      }
+      NetCase p = c, m = c;
+      p.x0[k] += h;
+      m.x0[k] -= h;
+      const double l0 = c.loss(), lp = p.loss(), lm = m.loss();
+      if (crosses_kink(lp - l0, l0 - lm, h)) {
+        ++kinks;
+        continue;
+      }
+      const double fd = (lp - lm) / (2.0 * h);
+      EXPECT_NEAR(dx[k], fd, 2e-3 * (1.0 + std::fabs(fd))) << "input " << i << " lane " << l;
+      ++checked;
+    }
+  EXPECT_LT(kinks, checked / 10);  // only a few differences straddle a ReLU kink
+}
+
+TEST(MlpKernels, DensityNetGradientMatchesFiniteDifferences) {
+  MlpLayout layout(small_arch());
+  check_net(layout, layout.density, 1);
+}
+
+TEST(MlpKernels, ColorNetGradientMatchesFiniteDifferences) {
+  MlpLayout layout(small_arch());
+  check_net(layout, layout.color, 2);
+}
+
+TEST(MlpKernels, PaddingLanesAddNothingToParameterGradients) {
+  MlpLayout layout(small_arch());
+  std::vector<float> params(layout.param_count);
+  init_mlp_params(layout, 3, params.data());
+  const auto& layers = layout.density;
+  std::vector<float> x0(size_t(layers[0].in) * kLanes, 0.5f), d(size_t(layers.back().out) * kLanes, 0.f);
+  for (int o = 0; o < layers.back().out; ++o) d[size_t(o) * kLanes + 0] = 1.f;  // only lane 0
+  std::vector<float> acts(size_t(layout.density_act_floats) * kLanes), g1(layout.param_count, 0.f),
+      g2(layout.param_count, 0.f), scratch(2 * size_t(layout.max_width) * kLanes);
+  net_forward(layers, params.data(), x0.data(), acts.data());
+  net_backward(layers, params.data(), x0.data(), acts.data(), d.data(), g1.data(), nullptr, scratch.data());
+  // Garbage inputs on lanes 1.. change nothing when their output gradient is zero.
+  for (int i = 0; i < layers[0].in; ++i)
+    for (int l = 1; l < kLanes; ++l) x0[size_t(i) * kLanes + l] = float(l) * 7.f - 50.f;
+  net_forward(layers, params.data(), x0.data(), acts.data());
+  net_backward(layers, params.data(), x0.data(), acts.data(), d.data(), g2.data(), nullptr, scratch.data());
+  EXPECT_EQ(g1, g2);
+}
+
+TEST(MlpKernels, LayerForwardIsAffineThenRelu) {
+  // density net [2, 2, 1]: h = relu(W0 x + b0), out = W1 h + b1, by hand.
+  MlpArch a;
+  a.density_widths = {2, 2, 1};
+  a.dir_frequencies = 0;
+  a.color_widths = {1 + 3, 3};
+  MlpLayout layout(a);
+  std::vector<float> p(layout.param_count, 0.f);
+  const auto& L0 = layout.density[0];
+  const auto& L1 = layout.density[1];
+  p[L0.w + 0] = 1.f, p[L0.w + 1] = 2.f, p[L0.w + 2] = -1.f, p[L0.w + 3] = 0.5f;
+  p[L0.b + 0] = 0.25f, p[L0.b + 1] = -3.f;
+  p[L1.w + 0] = 2.f, p[L1.w + 1] = -1.f, p[L1.b] = 0.5f;
+  std::vector<float> x(2 * kLanes, 0.f), acts(3 * kLanes);
+  x[0] = 1.f, x[kLanes] = 1.5f;      // lane 0: x = (1, 1.5)
+  x[1] = -2.f, x[kLanes + 1] = 4.f;  // lane 1: x = (-2, 4)
+  net_forward(layout.density, p.data(), x.data(), acts.data());
+  // lane 0: h = relu(1 + 3 + 0.25, -1 + 0.75 - 3) = (4.25, 0); out = 8.5 + 0.5 = 9
+  EXPECT_FLOAT_EQ(acts[0], 4.25f);
+  EXPECT_FLOAT_EQ(acts[kLanes], 0.f);
+  EXPECT_FLOAT_EQ(acts[2 * kLanes], 9.f);
+  // lane 1: h = relu(-2 + 8 + 0.25, 2 + 2 - 3) = (6.25, 1); out = 12.5 - 1 + 0.5 = 12
+  EXPECT_FLOAT_EQ(acts[1], 6.25f);
+  EXPECT_FLOAT_EQ(acts[kLanes + 1], 1.f);
+  EXPECT_FLOAT_EQ(acts[2 * kLanes + 1], 12.f);
+}
+
+TEST(MlpKernels, Int8QuantizationRoundsPerRow) {
+  const float row[4] = {0.5f, -1.27f, 0.01f, 0.f};
+  const float s = int8_row_scale(row, 4);
+  EXPECT_FLOAT_EQ(s, 0.01f);
+  EXPECT_EQ(int8_quantize(row[0], s), 50);
+  EXPECT_EQ(int8_quantize(row[1], s), -127);
+  EXPECT_EQ(int8_quantize(row[2], s), 1);
+  EXPECT_EQ(int8_quantize(10.f, s), 127);  // saturates
+  const float zeros[3] = {0, 0, 0};
+  EXPECT_EQ(int8_row_scale(zeros, 3), 1.f);
+}
+
+// --- volume rendering ---
+
+TEST(Volume, CompositeMatchesClosedForm) {
+  // Two samples with sigma = 2 and 0.5, delta = 0.1, on a grey background.
+  const float raw[2] = {std::log(2.f), std::log(0.5f)};
+  const float rgb[6] = {1, 0, 0, 0, 1, 0.5f};
+  const float bg[3] = {0.5f, 0.5f, 0.5f};
+  const CompositeResult r = composite(raw, rgb, 2, 0.1f, bg);
+  const double a0 = 1 - std::exp(-0.2), a1 = 1 - std::exp(-0.05);
+  const double T1 = 1 - a0, T2 = T1 * (1 - a1);
+  EXPECT_NEAR(r.rgb[0], a0 * 1 + T2 * 0.5, 1e-6);
+  EXPECT_NEAR(r.rgb[1], T1 * a1 * 1 + T2 * 0.5, 1e-6);
+  EXPECT_NEAR(r.rgb[2], T1 * a1 * 0.5 + T2 * 0.5, 1e-6);
+  EXPECT_NEAR(r.t_final, T2, 1e-6);
+}
+
+TEST(Volume, MarchStopsAfterTheSampleThatCrossesTheThreshold) {
+  // alpha = 1 - exp(-sigma delta) with sigma delta = ln 10: each sample divides T by 10.
+  const float delta = 0.5f;
+  const float raw[6] = {std::log(std::log(10.f) / delta), std::log(std::log(10.f) / delta),
+                        std::log(std::log(10.f) / delta), std::log(std::log(10.f) / delta),
+                        std::log(std::log(10.f) / delta), std::log(std::log(10.f) / delta)};
+  float T;
+  // T: 0.1, 0.01, 1e-3, 1e-4 (not below 1e-4 exactly? rounding) ... so use threshold 2e-3.
+  const int used = march_transmittance(raw, 6, delta, 2e-3f, 1.f, &T);
+  EXPECT_EQ(used, 3);  // after the third sample T = 1e-3 < 2e-3
+  EXPECT_NEAR(T, 1e-3, 1e-7);
+  EXPECT_EQ(march_transmittance(raw, 2, delta, 2e-3f, 1.f, &T), 2);  // never crosses
+}
+
+TEST(Volume, CompositeBackwardMatchesFiniteDifferences) {
+  const int n = 7;
+  std::vector<float> raw(n), rgb(3 * n);
+  for (int i = 0; i < n; ++i) {
+    raw[size_t(i)] = rnd(4, uint64_t(i), -1.f, 3.f);
+    for (int c = 0; c < 3; ++c) rgb[size_t(3 * i + c)] = rnd(5, uint64_t(3 * i + c), 0.f, 1.f);
+  }
+  raw[2] = 20.f;  // beyond the clamp: no gradient
+  const float bg[3] = {1.f, 0.8f, 0.2f};
+  const float g[3] = {0.3f, -0.7f, 1.1f};
+  const float delta = 0.05f;
+  auto loss = [&](const std::vector<float>& r, const std::vector<float>& c) {
+    const CompositeResult res = composite(r.data(), c.data(), n, delta, bg);
+    return double(g[0]) * res.rgb[0] + double(g[1]) * res.rgb[1] + double(g[2]) * res.rgb[2];
+  };
+  std::vector<float> d_raw(n), d_rgb(3 * n);
+  composite_backward(raw.data(), rgb.data(), n, delta, bg, g, d_raw.data(), d_rgb.data());
+  const float h = 1e-3f;
+  for (int i = 0; i < n; ++i) {
+    auto p = raw, m = raw;
+    p[size_t(i)] += h;
+    m[size_t(i)] -= h;
+    const double fd = (loss(p, rgb) - loss(m, rgb)) / (2.0 * h);
+    EXPECT_NEAR(d_raw[size_t(i)], fd, 1e-3 * (1 + std::fabs(fd))) << "raw " << i;
+  }
+  EXPECT_EQ(d_raw[2], 0.f);
+  for (int k = 0; k < 3 * n; ++k) {
+    auto p = rgb, m = rgb;
+    p[size_t(k)] += h;
+    m[size_t(k)] -= h;
+    const double fd = (loss(raw, p) - loss(raw, m)) / (2.0 * h);
+    EXPECT_NEAR(d_rgb[size_t(k)], fd, 1e-3 * (1 + std::fabs(fd))) << "rgb " << k;
+  }
+}
+
+// --- feature grids ---
+
+struct GridSamples {
+  std::vector<float> pos;
+  std::vector<int16_t> micro;
+  std::vector<int32_t> ids;
+};
+
+GridSamples random_samples(int micro_res, int n, uint64_t seed) {
+  GridSamples s;
+  for (int i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      float p = rnd(seed, uint64_t(3 * i + a), 0.f, float(micro_res));
+      s.pos.push_back(p);
+      s.micro.push_back(int16_t(std::min(int(std::floor(p)), micro_res - 1)));
+    }
+    s.ids.push_back(i);
+  }
+  return s;
+}
+
+TEST(FeatureGrid, PyramidInterpolatesLinearFunctionsExactly) {
+  // Vertex values a linear function of position: every level reproduces it.
+  FeaturePyramid pyr(32, {8, 16, 32}, 7, 0.f);
+  for (auto& L : pyr.levels()) {
+    const int n = L.res + 1;
+    const float cell = float(32 / L.res);
+    for (int z = 0; z < n; ++z)
+      for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x)
+          for (int k = 0; k < kLevelChannels; ++k)
+            L.value[L.vertex_index(x, y, z) * kLevelChannels + size_t(k)] =
+                float(k + 1) * (x * cell) - 0.5f * (y * cell) + 0.25f * (z * cell);
+  }
+  const Vec3f p{10.3f, 21.7f, 3.9f};
+  float out[12];
+  pyr.interpolate(p, {10, 21, 3}, out);
+  for (int li = 0; li < 3; ++li)
+    for (int k = 0; k < 4; ++k)
+      EXPECT_NEAR(out[li * 4 + k], float(k + 1) * p.x - 0.5f * p.y + 0.25f * p.z, 1e-4) << li << " " << k;
+}
+
+TEST(FeatureGrid, PyramidGradientMatchesFiniteDifferences) {
+  const int R = 32;
+  FeaturePyramid pyr(R, {8, 16, 32}, 11, 0.5f);
+  const int F = pyr.channels();
+  GridSamples s = random_samples(R, 300, 12);
+  const int n = int(s.ids.size());
+  std::vector<float> r(size_t(n) * F);
+  for (size_t i = 0; i < r.size(); ++i) r[i] = rnd(13, i, -1.f, 1.f);
+  auto loss = [&](const FeaturePyramid& p) {
+    double L = 0;
+    std::vector<float> f(static_cast<size_t>(F));
+    for (int i = 0; i < n; ++i) {
+      p.interpolate({s.pos[3 * size_t(i)], s.pos[3 * size_t(i) + 1], s.pos[3 * size_t(i) + 2]},
+                    {s.micro[3 * size_t(i)], s.micro[3 * size_t(i) + 1], s.micro[3 * size_t(i) + 2]}, f.data());
+      for (int c = 0; c < F; ++c) L += double(r[size_t(i) * F + c]) * f[size_t(c)];
+    }
+    return L;
+  };
+  GradientSlabs slabs;
+  slabs.build(R, pyr.slab_micro(), s.ids, s.micro);
+  pyr.scatter_gradients(slabs, s.pos, s.micro, r);
+  // The loss is linear in the values: the finite difference is exact up to rounding.
+  int touched = 0;
+  for (size_t li = 0; li < pyr.levels().size(); ++li) {
+    auto& L = pyr.levels()[li];
+    for (size_t v = 0; v < L.value.size(); v += 37) {
+      const float keep = L.value[v];
+      L.value[v] = keep + 0.5f;
+      const double lp = loss(pyr);
+      L.value[v] = keep - 0.5f;
+      const double lm = loss(pyr);
+      L.value[v] = keep;
+      const double fd = (lp - lm) / 1.0;
+      EXPECT_NEAR(L.adam.grad[v], fd, 1e-3 * (1 + std::fabs(fd))) << "level " << li << " value " << v;
+      if (L.adam.grad[v] != 0.f) ++touched;
+      EXPECT_EQ(L.adam.touched[v / kLevelChannels] != 0, L.adam.grad[v] != 0.f);
+    }
+  }
+  EXPECT_GT(touched, 50);
+}
+
+TEST(FeatureGrid, PyramidGradientDoesNotDependOnSlabSplit) {
+  // Gradients from many threads are summed per vertex in sample order, so
+  // they equal a plain serial accumulation bit for bit.
+  const int R = 64;
+  FeaturePyramid pyr(R, {16, 64}, 21, 0.5f);
+  const int F = pyr.channels();
+  GridSamples s = random_samples(R, 2000, 22);
+  std::vector<float> r(s.ids.size() * size_t(F));
+  for (size_t i = 0; i < r.size(); ++i) r[i] = rnd(23, i, -1.f, 1.f);
+  GradientSlabs slabs;
+  slabs.build(R, pyr.slab_micro(), s.ids, s.micro);
+  pyr.scatter_gradients(slabs, s.pos, s.micro, r);
+  for (size_t li = 0; li < pyr.levels().size(); ++li) {
+    const auto& L = pyr.levels()[li];
+    std::vector<float> serial(L.value.size(), 0.f);
+    const float inv = 1.f / float(1 << L.shift);
+    for (size_t i = 0; i < s.ids.size(); ++i) {
+      const int cx = s.micro[3 * i] >> L.shift, cy = s.micro[3 * i + 1] >> L.shift, cz = s.micro[3 * i + 2] >> L.shift;
+      float w[8];
+      trilinear_weights(s.pos[3 * i] * inv - float(cx), s.pos[3 * i + 1] * inv - float(cy),
+                        s.pos[3 * i + 2] * inv - float(cz), w);
+      for (int c = 0; c < 8; ++c) {
+        const size_t v = L.vertex_index(cx + (c & 1), cy + ((c >> 1) & 1), cz + (c >> 2));
+        for (int k = 0; k < 4; ++k) serial[v * 4 + size_t(k)] += w[c] * r[i * size_t(F) + li * 4 + size_t(k)];
+      }
+    }
+    EXPECT_EQ(serial, L.adam.grad) << "level " << li;
+  }
+}
+
+TEST(FeatureGrid, BlockGradientMatchesFiniteDifferences) {
+  const int R = 32, F = 4;
+  // Two blocks: fine voxels (1, 2, 3) and (2, 2, 3) of the 8^3 fine grid.
+  std::vector<uint32_t> fine = {linear_index(1, 2, 3, 8), linear_index(2, 2, 3, 8)};
+  std::vector<float> values(fine.size() * kBlockVerts * F);
+  for (size_t i = 0; i < values.size(); ++i) values[i] = rnd(31, i, -1.f, 1.f);
+  BlockFeatures blk(R, F, fine, values);
+  GridSamples s;
+  for (int i = 0; i < 200; ++i) {
+    const float p[3] = {rnd(32, uint64_t(i), 4.f, 12.f), rnd(33, uint64_t(i), 8.f, 12.f),
+                        rnd(34, uint64_t(i), 12.f, 16.f)};
+    for (int a = 0; a < 3; ++a) {
+      s.pos.push_back(p[a]);
+      s.micro.push_back(int16_t(std::floor(p[a])));
+    }
+    s.ids.push_back(i);
+  }
+  std::vector<float> r(s.ids.size() * F);
+  for (size_t i = 0; i < r.size(); ++i) r[i] = rnd(35, i, -1.f, 1.f);
+  auto loss = [&](const BlockFeatures& b) {
+    double L = 0;
+    float f[F];
+    for (size_t i = 0; i < s.ids.size(); ++i) {
+      EXPECT_TRUE(b.interpolate({s.pos[3 * i], s.pos[3 * i + 1], s.pos[3 * i + 2]},
+                                {s.micro[3 * i], s.micro[3 * i + 1], s.micro[3 * i + 2]}, f));
+      for (int c = 0; c < F; ++c) L += double(r[i * F + size_t(c)]) * f[c];
+    }
+    return L;
+  };
+  GradientSlabs slabs;
+  slabs.build(R, kMicroPerFine, s.ids, s.micro);
+  blk.scatter_gradients(slabs, s.pos, s.micro, r);
+  for (size_t v = 0; v < blk.values().size(); v += 3) {
+    const float keep = blk.values()[v];
+    blk.values()[v] = keep + 0.5f;
+    const double lp = loss(blk);
+    blk.values()[v] = keep - 0.5f;
+    const double lm = loss(blk);
+    blk.values()[v] = keep;
+    EXPECT_NEAR(blk.adam().grad[v], lp - lm, 1e-3 * (1 + std::fabs(lp - lm))) << "value " << v;
+  }
+}
+
+TEST(FeatureGrid, BlockInterpolationUsesTheMicroVoxelCorners) {
+  // Block of fine voxel (0,0,0); vertex (i,j,k) holds i + 10 j + 100 k.
+  std::vector<float> values(kBlockVerts);
+  for (int v = 0; v < kBlockVerts; ++v) values[size_t(v)] = float(v % 5 + 10 * ((v / 5) % 5) + 100 * (v / 25));
+  BlockFeatures blk(32, 1, {0}, values);
+  float f;
+  ASSERT_TRUE(blk.interpolate({2.25f, 1.5f, 3.75f}, {2, 1, 3}, &f));
+  EXPECT_NEAR(f, 2.25f + 15.f + 375.f, 1e-4);
+  EXPECT_FALSE(blk.interpolate({5.f, 1.f, 1.f}, {5, 1, 1}, &f));  // fine voxel (1,0,0) has no block
+}
+
+TEST(FeatureGrid, Int4QuantizerMatchesTheModelFormula) {
+  // Range [-1, 2]: scale 0.2, zero point 5.
+  Int4Channel q = int4_channel_for_range(-1.f, 2.f);
+  EXPECT_FLOAT_EQ(q.scale, 0.2f);
+  EXPECT_EQ(q.zero_point, 5);
+  EXPECT_EQ(q.quantize(0.f), 5);
+  EXPECT_EQ(q.quantize(2.f), 15);
+  EXPECT_EQ(q.quantize(-1.f), 0);
+  EXPECT_EQ(q.quantize(9.f), 15);  // saturates
+  EXPECT_NEAR(q.fake(0.33f), 0.4f, 1e-6);
+  EXPECT_NEAR(q.fake(0.29f), 0.2f, 1e-6);
+  // A positive-only range still represents 0 exactly.
+  Int4Channel p = int4_channel_for_range(0.5f, 1.5f);
+  EXPECT_EQ(p.zero_point, 0);
+  EXPECT_EQ(p.fake(0.f), 0.f);
+}
+
+TEST(FeatureGrid, QuantizedBlockGradientIsStraightThrough) {
+  std::vector<float> values(kBlockVerts * 2);
+  for (size_t i = 0; i < values.size(); ++i) values[i] = rnd(41, i, -1.f, 1.f);
+  BlockFeatures a(32, 2, {0}, values), b(32, 2, {0}, values);
+  b.set_quantization(b.fit_quantization());
+  GridSamples s = random_samples(4, 50, 42);
+  std::vector<float> r(s.ids.size() * 2);
+  for (size_t i = 0; i < r.size(); ++i) r[i] = rnd(43, i, -1.f, 1.f);
+  GradientSlabs slabs;
+  slabs.build(32, kMicroPerFine, s.ids, s.micro);
+  a.scatter_gradients(slabs, s.pos, s.micro, r);
+  b.scatter_gradients(slabs, s.pos, s.micro, r);
+  EXPECT_EQ(a.adam().grad, b.adam().grad);
+  // ... while the forward reads quantized values.
+  float fa[2], fb[2];
+  a.interpolate({0.f, 0.f, 0.f}, {0, 0, 0}, fa);
+  b.interpolate({0.f, 0.f, 0.f}, {0, 0, 0}, fb);
+  EXPECT_EQ(fb[0], b.quantization()[0].fake(values[0]));
+  EXPECT_NE(fa[0], fb[0]);
+}
+
+}  // namespace
+}  // namespace edrnr::train
