@@ -1,0 +1,80 @@
+#pragma once
+// Ray and sample-position arithmetic shared by the traversal units (TSPS, CTU,
+// FTU) and the OoO-SI's sample coordinate calculator.
+//
+// The chip works in micro-grid units: the scene box corner is 0 and a micro
+// voxel edge is 1. Candidate k of a ray sits at
+//   t_k = round(k + 0.5) * step          (traversal float, one rounding each)
+//   p_k = fma(d, t_k, o)                 (per axis, a single rounding)
+// where o and d are the ray origin and direction in micro units and step is
+// the sample step in micro-voxel edges (the reference renderer's delta). Each
+// coordinate of p_k is a monotone function of k (every rounding is monotone),
+// so the candidates whose point lies in one cell of any tier form one
+// contiguous run of k, and p_k depends on (ray, k) only: never on the order in
+// which the units visit the candidates.
+//
+// A point belongs to micro voxel min(floor(p), Rm - 1) per axis when
+// 0 <= p <= Rm (the reference renderer's convention), and to the cell of a
+// tier with cells of S micro voxels given by that micro voxel divided by S.
+#include <cstdint>
+
+#include "core/custom_float.h"
+#include "core/vec.h"
+
+namespace edrnr::chip {
+
+// A ray as the traversal sees it (all values of the traversal float format).
+struct ChipRay {
+  Vec3d origin;  // o, micro units
+  Vec3d dir;     // d, micro units per micro-voxel edge of t (unit length for a cubic scene box)
+};
+
+// A half-open run of candidates [begin, end); empty when begin >= end.
+struct KInterval {
+  int64_t begin = 0, end = 0;
+  bool empty() const { return begin >= end; }
+};
+
+// Candidate indices never exceed this (about 4 million steps).
+inline constexpr int64_t kMaxCandidate = int64_t(1) << 22;
+
+class RayMath {
+ public:
+  // fmt: the traversal float; step_micro > 0; micro_res: Rm.
+  RayMath(const FloatFormat& fmt, double step_micro, int micro_res);
+
+  const FloatFormat& format() const { return fmt_; }
+  double step() const { return step_; }
+  int micro_res() const { return micro_res_; }
+
+  double t_of(int64_t k) const { return fmt_.mul(fmt_.round(double(k) + 0.5), step_); }
+  double coord(const ChipRay& r, int64_t k, int axis) const { return fmt_.fma(r.dir[axis], t_of(k), r.origin[axis]); }
+  Vec3d point(const ChipRay& r, int64_t k) const;
+
+  // The micro voxel of a point inside [0, Rm]^3 (clamped otherwise).
+  int micro_index(double c) const;
+  Vec3i micro_voxel(const Vec3d& p) const { return {micro_index(p.x), micro_index(p.y), micro_index(p.z)}; }
+  // The cell of a tier with cells of cell_micro micro voxels per axis.
+  Vec3i cell(const Vec3d& p, int cell_micro) const;
+  Vec3i cell_at(const ChipRay& r, int64_t k, int cell_micro) const { return cell(point(r, k), cell_micro); }
+
+  // The first candidate k in (k0, k_end) whose point is not in `cell` (cells
+  // of cell_micro micro voxels), or k_end if the ray stays in it. The point of
+  // k0 must be in the cell. A first guess from the ray's exit distance is
+  // checked exactly (k-1 inside, k outside) and corrected by bisection, so the
+  // result does not depend on the guess. `evals` (optional) counts the
+  // positions computed.
+  int64_t cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& cell, int cell_micro,
+                    uint64_t* evals = nullptr) const;
+
+  // The run of candidates k >= 0 whose point lies in the closed box
+  // [lo, hi] (micro units), found exactly by bisection on each axis bound.
+  KInterval box_interval(const ChipRay& r, const Vec3d& lo, const Vec3d& hi, uint64_t* evals = nullptr) const;
+
+ private:
+  FloatFormat fmt_;
+  double step_;
+  int micro_res_;
+};
+
+}  // namespace edrnr::chip

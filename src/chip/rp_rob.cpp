@@ -1,0 +1,147 @@
+#include "chip/rp_rob.h"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+#include "core/error.h"
+
+namespace edrnr::chip {
+
+RpRob::RpRob(const RpRobConfig& config) : config_(config) {
+  if (config.entries < 1) fail("RP-ROB entries must be at least 1 (got {})", config.entries);
+  if (config.entry_depth < 1) fail("RP-ROB entry depth must be at least 1 (got {})", config.entry_depth);
+  if (config.recent_tags < 0)
+    fail("RP-ROB recent-tags recorder size must not be negative (got {})", config.recent_tags);
+  entries_.resize(size_t(config.entries));
+}
+
+void RpRob::note_recent(uint32_t tag) {
+  if (config_.recent_tags == 0) return;
+  auto it = std::find(recent_.begin(), recent_.end(), tag);
+  if (it != recent_.end()) recent_.erase(it);
+  recent_.push_front(tag);
+  if (recent_.size() > size_t(config_.recent_tags)) recent_.pop_back();
+}
+
+bool RpRob::in_recent(uint32_t tag) const { return std::find(recent_.begin(), recent_.end(), tag) != recent_.end(); }
+
+bool RpRob::insert(uint32_t rp, uint32_t tag) {
+  if (where_.count(rp)) throw std::logic_error("RP-ROB insert: RP " + std::to_string(rp) + " is already held");
+  int chosen = -1;
+  if (config_.reorder) {
+    // An entry of this tag with room, the most occupied first.
+    for (int e = 0; e < entries(); ++e) {
+      const Entry& en = entries_[size_t(e)];
+      if (en.count > 0 && en.tag == tag && en.count < config_.entry_depth &&
+          (chosen < 0 || en.count > entries_[size_t(chosen)].count))
+        chosen = e;
+    }
+    if (chosen < 0)
+      for (int e = 0; e < entries() && chosen < 0; ++e)
+        if (entries_[size_t(e)].count == 0) chosen = e;
+  } else {
+    for (int e = 0; e < entries() && chosen < 0; ++e)
+      if (entries_[size_t(e)].count < config_.entry_depth) chosen = e;
+  }
+  if (chosen < 0) {
+    ++counters_.insert_refusals;
+    return false;
+  }
+  Entry& en = entries_[size_t(chosen)];
+  if (en.count == 0) en.tag = tag;
+  ++en.count;
+  en.ready.push_back({rp, tag, stamp_++});
+  where_[rp] = {chosen, tag, false};
+  note_recent(tag);
+  ++counters_.inserts;
+  uint64_t used = 0;
+  for (const Entry& x : entries_) used += x.count > 0;
+  counters_.peak_entries_used = std::max(counters_.peak_entries_used, used);
+  return true;
+}
+
+ScheduledRp RpRob::pop(int e) {
+  Entry& en = entries_[size_t(e)];
+  Ready r = en.ready.front();
+  en.ready.pop_front();
+  where_[r.rp].in_flight = true;
+  ++counters_.schedules;
+  if (!has_last_scheduled_ || last_scheduled_ != r.tag) ++counters_.tag_runs;
+  has_last_scheduled_ = true;
+  last_scheduled_ = r.tag;
+  return {r.rp, r.tag, e};
+}
+
+std::optional<ScheduledRp> RpRob::schedule() {
+  if (!config_.reorder) {
+    int best = -1;
+    for (int e = 0; e < entries(); ++e) {
+      const Entry& en = entries_[size_t(e)];
+      if (!en.ready.empty() && (best < 0 || en.ready.front().stamp < entries_[size_t(best)].ready.front().stamp))
+        best = e;
+    }
+    if (best < 0) return std::nullopt;
+    ScheduledRp s = pop(best);
+    has_current_ = true;
+    current_ = s.tag;
+    return s;
+  }
+  if (has_current_) {
+    // Serve the current tag: its entry with the most free room.
+    int best = -1;
+    bool any_placeholder = false;
+    for (int e = 0; e < entries(); ++e) {
+      const Entry& en = entries_[size_t(e)];
+      if (en.count == 0 || en.tag != current_) continue;
+      any_placeholder = true;
+      if (!en.ready.empty() && (best < 0 || en.count < entries_[size_t(best)].count)) best = e;
+    }
+    if (best >= 0) return pop(best);
+    if (any_placeholder) return std::nullopt;  // wait until they come back or retire
+  }
+  // Tag switch.
+  int hit = -1, other = -1;
+  for (int e = 0; e < entries(); ++e) {
+    const Entry& en = entries_[size_t(e)];
+    if (en.ready.empty()) continue;
+    if (in_recent(en.tag)) {
+      if (hit < 0 || en.count < entries_[size_t(hit)].count) hit = e;
+    } else if (other < 0 || en.count > entries_[size_t(other)].count) {
+      other = e;
+    }
+  }
+  int chosen = hit >= 0 ? hit : other;
+  if (chosen < 0) {
+    has_current_ = false;
+    return std::nullopt;
+  }
+  if (hit >= 0) ++counters_.recorder_hits;
+  has_current_ = true;
+  current_ = entries_[size_t(chosen)].tag;
+  return pop(chosen);
+}
+
+RpRob::Place& RpRob::in_flight_place(uint32_t rp, const char* op) {
+  auto it = where_.find(rp);
+  if (it == where_.end() || !it->second.in_flight)
+    throw std::logic_error(std::string("RP-ROB ") + op + ": RP " + std::to_string(rp) + " is not in flight");
+  return it->second;
+}
+
+void RpRob::reschedule(uint32_t rp) {
+  Place& p = in_flight_place(rp, "reschedule");
+  p.in_flight = false;
+  entries_[size_t(p.entry)].ready.push_back({rp, p.tag, stamp_++});
+  ++counters_.reschedules;
+}
+
+void RpRob::retire(uint32_t rp) {
+  Place& p = in_flight_place(rp, "retire");
+  Entry& en = entries_[size_t(p.entry)];
+  --en.count;
+  where_.erase(rp);
+  ++counters_.retires;
+}
+
+}  // namespace edrnr::chip

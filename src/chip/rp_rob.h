@@ -1,0 +1,126 @@
+#pragma once
+// RP-ROB, the ray-packet reordering buffer (paper Sections III-B, IV-D, Fig. 13).
+//
+// The RP-ROB holds placeholders for candidate RPs (CRPs) that the CTU found to
+// be inside a non-empty coarse voxel (CV), and hands them to the FTU clustered
+// by CV tag (CCRPs). It has `entries` entries of `entry_depth` placeholders.
+// Entries are labelled dynamically: an empty entry takes the tag of the first
+// CRP put in it, a CV with many CRPs may occupy several entries, and an entry
+// whose last placeholder retires becomes empty and unlabelled again.
+//
+// A placeholder is either ready (waiting in its entry, first in first out) or
+// in flight (scheduled to the FTU and not yet back). Operations:
+//   insert(rp, tag)  a new CRP. Goes to an entry labelled `tag` that has room,
+//                    the most occupied one first; else to an empty entry,
+//                    which is labelled `tag`; else it is refused (the CTU
+//                    stalls). The recent-tags recorder (LRU) notes `tag`.
+//   schedule()       the next CCRP for the FTU. While the current tag has
+//                    ready placeholders, the entry of that tag with the most
+//                    free room is served. While the current tag still has
+//                    placeholders in flight, nothing is scheduled. When all of
+//                    the current tag's CCRPs have retired, the tag switches:
+//                    among entries with ready CCRPs, those whose tag is in the
+//                    recent-tags recorder are preferred and of them the one
+//                    holding the fewest CCRPs is served; with no recorder hit,
+//                    the entry holding the most CCRPs is served (an
+//                    assumption: most reuse per MLP load). Ties go to the
+//                    lowest entry index.
+//   reschedule(rp)   an in-flight CCRP goes back to its entry, ready (fine
+//                    voxel transition: more samples in the same CV).
+//   retire(rp)       an in-flight CCRP leaves (CV transition or termination);
+//                    its placeholder is released.
+// With reordering switched off, tags are ignored: a CRP goes to the first entry
+// with room and schedule() serves the oldest ready placeholder of all entries
+// (insertion and reschedule order), as a plain FIFO would.
+#include <cstdint>
+#include <deque>
+#include <optional>
+#include <unordered_map>
+#include <vector>
+
+namespace edrnr::chip {
+
+struct RpRobConfig {
+  int entries = 8;
+  int entry_depth = 16;
+  int recent_tags = 4;  // size of the LRU recent-tags recorder
+  bool reorder = true;
+};
+
+struct RpRobCounters {
+  uint64_t inserts = 0;
+  uint64_t insert_refusals = 0;  // insert() calls that found no room
+  uint64_t schedules = 0;
+  uint64_t tag_runs = 0;  // maximal runs of consecutive schedules with one tag
+  uint64_t reschedules = 0;
+  uint64_t retires = 0;
+  uint64_t recorder_hits = 0;  // tag switches decided by the recent-tags recorder
+  uint64_t peak_entries_used = 0;
+};
+
+struct ScheduledRp {
+  uint32_t rp = 0;   // RP pointer
+  uint32_t tag = 0;  // CV tag
+  int entry = 0;
+};
+
+class RpRob {
+ public:
+  // Throws Error if a size is not positive.
+  explicit RpRob(const RpRobConfig& config);
+
+  bool insert(uint32_t rp, uint32_t tag);
+  std::optional<ScheduledRp> schedule();
+  void reschedule(uint32_t rp);  // throws std::logic_error unless rp is in flight
+  void retire(uint32_t rp);      // throws std::logic_error unless rp is in flight
+
+  // Observers.
+  int entries() const { return int(entries_.size()); }
+  bool entry_labelled(int e) const { return entries_[size_t(e)].count > 0; }
+  uint32_t entry_tag(int e) const { return entries_[size_t(e)].tag; }
+  int entry_count(int e) const { return entries_[size_t(e)].count; }  // placeholders, ready + in flight
+  int entry_ready(int e) const { return int(entries_[size_t(e)].ready.size()); }
+  size_t placeholders() const { return where_.size(); }
+  bool empty() const { return where_.empty(); }
+  std::optional<uint32_t> current_tag() const {
+    return has_current_ ? std::optional<uint32_t>(current_) : std::nullopt;
+  }
+  // Tags in the recent-tags recorder, most recent first.
+  const std::deque<uint32_t>& recent_tags() const { return recent_; }
+  const RpRobCounters& counters() const { return counters_; }
+
+ private:
+  struct Ready {
+    uint32_t rp;
+    uint32_t tag;
+    uint64_t stamp;  // insertion / reschedule order
+  };
+  struct Entry {
+    uint32_t tag = 0;
+    int count = 0;
+    std::deque<Ready> ready;
+  };
+  struct Place {
+    int entry;
+    uint32_t tag;
+    bool in_flight;
+  };
+
+  void note_recent(uint32_t tag);
+  bool in_recent(uint32_t tag) const;
+  ScheduledRp pop(int e);
+  Place& in_flight_place(uint32_t rp, const char* op);
+
+  RpRobConfig config_;
+  std::vector<Entry> entries_;
+  std::unordered_map<uint32_t, Place> where_;
+  std::deque<uint32_t> recent_;
+  bool has_current_ = false;
+  uint32_t current_ = 0;
+  bool has_last_scheduled_ = false;
+  uint32_t last_scheduled_ = 0;
+  uint64_t stamp_ = 0;
+  RpRobCounters counters_;
+};
+
+}  // namespace edrnr::chip
