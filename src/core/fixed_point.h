@@ -149,7 +149,8 @@ constexpr int64_t requantize(int64_t x, Requant q, Rounding mode) {
 // round(x * scale) by at most 1 while |x * scale| <= 2^(multiplier_bits-1).
 // Scales below 2^-63 lose significant bits (multiplier may be 0).
 // Throws edrnr::Error if the scale is not finite and > 0, if
-// scale >= 2^multiplier_bits (a right shift cannot express it), or if
+// scale >= 2^multiplier_bits or rounds up to it (a right shift cannot
+// express it), or if
 // multiplier_bits is out of range.
 Requant requant_from_scale(double scale, int multiplier_bits);
 
