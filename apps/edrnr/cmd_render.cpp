@@ -1,0 +1,154 @@
+// edrnr render: renders one image of a model from a dataset view, a camera
+// JSON file or an orbit around the origin.
+#include <fmt/format.h>
+
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <string>
+
+#include "commands.h"
+#include "core/error.h"
+#include "core/image.h"
+#include "data/dataset.h"
+#include "model/model_io.h"
+#include "render/cameras.h"
+#include "render/options.h"
+#include "render/reference.h"
+
+namespace edrnr::cli {
+namespace {
+
+// The renderers `--engine` can pick. A new engine is one more line here.
+struct Engine {
+  const char* name;
+  const char* description;
+  Image (*render)(const SceneModel&, const Camera&, const RenderSettings&, RenderStats*);
+};
+const Engine kEngines[] = {
+    {"reference", "float volume rendering, the golden model", render_reference},
+};
+
+const Engine& find_engine(const std::string& name) {
+  std::string names;
+  for (const Engine& e : kEngines) {
+    if (name == e.name) return e;
+    names += (names.empty() ? "" : ", ") + std::string(e.name);
+  }
+  fail("--engine '{}': unknown (available: {})", name, names);
+}
+
+struct RenderOptions {
+  std::string model, output;
+  std::string dataset, split = "test", camera_file;
+  int view = 0;
+  double orbit = 0, elevation = 30, radius = 4, fov = 40;
+  int width = 0, height = 0;
+  float step = 1.f;
+  std::string form = "auto", background = "white", engine = "reference";
+  int threads = 0;
+  CLI::Option *dataset_opt, *camera_opt, *orbit_opt, *split_opt, *view_opt, *elev_opt, *radius_opt, *fov_opt,
+      *width_opt, *height_opt;
+};
+
+// The image size: the flags if given (one alone keeps the aspect ratio), else
+// the camera's own.
+void pick_size(const RenderOptions& o, int w0, int h0, int& w, int& h) {
+  w = w0;
+  h = h0;
+  if (o.width_opt->count() && o.height_opt->count()) {
+    w = o.width;
+    h = o.height;
+  } else if (o.width_opt->count()) {
+    w = o.width;
+    h = std::max(1, int(std::lround(double(o.width) * h0 / w0)));
+  } else if (o.height_opt->count()) {
+    h = o.height;
+    w = std::max(1, int(std::lround(double(o.height) * w0 / h0)));
+  }
+  if (w <= 0 || h <= 0 || w > 16384 || h > 16384) fail("--width/--height {}x{}: must be 1..16384 pixels", w, h);
+}
+
+Camera pick_camera(const RenderOptions& o) {
+  const int sources = int(o.dataset_opt->count() > 0) + int(o.camera_opt->count() > 0) + int(o.orbit_opt->count() > 0);
+  if (sources != 1) fail("give exactly one of --dataset, --camera and --orbit");
+  if (!o.dataset_opt->count() && (o.split_opt->count() || o.view_opt->count()))
+    fail("--split and --view need --dataset");
+  if (!o.orbit_opt->count() && (o.elev_opt->count() || o.radius_opt->count() || o.fov_opt->count()))
+    fail("--elevation, --radius and --fov need --orbit");
+  int w, h;
+  if (o.orbit_opt->count()) {
+    pick_size(o, 800, 800, w, h);
+    return orbit_camera(w, h, o.orbit, o.elevation, o.radius, o.fov);
+  }
+  Camera cam;
+  if (o.camera_opt->count()) {
+    cam = load_camera_json(o.camera_file);
+  } else {
+    DatasetOptions d;
+    d.split = o.split;
+    d.load_images = false;
+    const Dataset ds = load_dataset(o.dataset, d);
+    if (o.view < 0 || size_t(o.view) >= ds.frames.size())
+      fail("--view {}: the {} split of '{}' has views 0..{}", o.view, o.split, o.dataset, ds.frames.size() - 1);
+    cam = ds.frames[size_t(o.view)].camera;
+  }
+  pick_size(o, cam.width, cam.height, w, h);
+  return (w == cam.width && h == cam.height) ? cam : resize_camera(cam, w, h);
+}
+
+void run_render(const RenderOptions& o) {
+  const Engine& engine = find_engine(o.engine);
+  RenderSettings s;
+  s.step_micro = o.step;
+  s.form = parse_model_form(o.form, "--form");
+  parse_background(o.background, "--background", s.background);
+  if (o.threads < 0) fail("--threads {}: must be 0 (all cores) or more", o.threads);
+  s.threads = o.threads;
+  if (!(o.step > 0.f && std::isfinite(o.step))) fail("--step {}: must be a positive number of micro voxels", o.step);
+  const Camera cam = pick_camera(o);
+  const SceneModel model = load_model(o.model);
+
+  RenderStats stats;
+  const auto t0 = std::chrono::steady_clock::now();
+  const Image img = engine.render(model, cam, s, &stats);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  write_png(o.output, img);
+
+  const ResolvedForm form = resolve_model_form(model, s.form);
+  fmt::print("{}: {}x{} with the {} engine ({} features, {} MLPs)\n", o.output, img.width, img.height, engine.name,
+             form.quantized_features ? "INT4" : "float", form.quantized_mlps ? "INT8" : "float");
+  fmt::print("  rays {}  (hit AABB {})\n", stats.rays, stats.rays_hit_aabb);
+  fmt::print("  samples {}  ({:.2f} per ray)\n", stats.samples, stats.rays ? double(stats.samples) / stats.rays : 0.0);
+  fmt::print("  occupancy checks {}\n", stats.occupancy_checks);
+  fmt::print("  {:.3f} s  {:.0f} rays/s  {:.0f} samples/s\n", seconds, double(stats.rays) / seconds,
+             double(stats.samples) / seconds);
+}
+
+void register_render_cmd(CLI::App& app) {
+  auto o = std::make_shared<RenderOptions>();
+  CLI::App* cmd = app.add_subcommand("render", "Render one image of a model");
+  cmd->add_option("model", o->model, "the .edrnr model")->required();
+  cmd->add_option("-o,--output", o->output, "the PNG to write")->required();
+  o->dataset_opt = cmd->add_option("--dataset", o->dataset, "camera from a NeRF dataset folder (transforms_*.json)");
+  o->split_opt = cmd->add_option("--split", o->split, "dataset split")->capture_default_str();
+  o->view_opt = cmd->add_option("--view", o->view, "dataset view index")->capture_default_str();
+  o->camera_opt = cmd->add_option("--camera", o->camera_file, "camera from a JSON file (docs/rendering.md)");
+  o->orbit_opt = cmd->add_option("--orbit", o->orbit, "camera on a circle around the origin, at this azimuth (deg)");
+  o->elev_opt = cmd->add_option("--elevation", o->elevation, "orbit elevation (deg)")->capture_default_str();
+  o->radius_opt = cmd->add_option("--radius", o->radius, "orbit radius (scene units)")->capture_default_str();
+  o->fov_opt = cmd->add_option("--fov", o->fov, "orbit horizontal field of view (deg)")->capture_default_str();
+  o->width_opt = cmd->add_option("--width", o->width, "image width (default 800, or the camera's)");
+  o->height_opt = cmd->add_option("--height", o->height, "image height (default: keeps the aspect ratio)");
+  cmd->add_option("--step", o->step, "sample spacing in micro voxels")->capture_default_str();
+  cmd->add_option("--form", o->form, "auto, float or quantized")->capture_default_str();
+  cmd->add_option("--background", o->background, "white, black or R,G,B")->capture_default_str();
+  cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();
+  cmd->add_option("--engine", o->engine, "renderer: reference")->capture_default_str();
+  cmd->callback([o] { run_render(*o); });
+}
+
+Registrar reg{30, register_render_cmd};
+
+}  // namespace
+}  // namespace edrnr::cli
