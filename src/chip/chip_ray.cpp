@@ -57,7 +57,8 @@ int64_t RayMath::cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Ve
       return micro_index(coord(r, k, a)) / cell_micro != c[a];
     };
     const double face = d > 0 ? double((c[a] + 1) * cell_micro) : double(c[a] * cell_micro);
-    if ((d > 0 && face >= double(micro_res_)) || (d < 0 && face <= 0.0)) continue;  // the last cell: only the box ends it
+    if ((d > 0 && face >= double(micro_res_)) || (d < 0 && face <= 0.0))
+      continue;                            // the last cell: only the box ends it
     const int64_t lo = k0 + 1, hi = best;  // only an exit before `best` matters
     if (lo >= hi) break;
     // First guess: the candidate just past the face, then checked exactly.
@@ -88,11 +89,23 @@ KInterval RayMath::box_interval(const ChipRay& r, const Vec3d& lo, const Vec3d& 
     // Inside along this axis: a run [enter, leave) of k (the coordinate is monotone).
     int64_t enter, leave;
     if (d > 0) {
-      enter = first_true(0, kMaxCandidate, [&](int64_t k) { count(); return coord(r, k, a) >= lo[a]; });
-      leave = first_true(enter, kMaxCandidate, [&](int64_t k) { count(); return coord(r, k, a) > hi[a]; });
+      enter = first_true(0, kMaxCandidate, [&](int64_t k) {
+        count();
+        return coord(r, k, a) >= lo[a];
+      });
+      leave = first_true(enter, kMaxCandidate, [&](int64_t k) {
+        count();
+        return coord(r, k, a) > hi[a];
+      });
     } else {
-      enter = first_true(0, kMaxCandidate, [&](int64_t k) { count(); return coord(r, k, a) <= hi[a]; });
-      leave = first_true(enter, kMaxCandidate, [&](int64_t k) { count(); return coord(r, k, a) < lo[a]; });
+      enter = first_true(0, kMaxCandidate, [&](int64_t k) {
+        count();
+        return coord(r, k, a) <= hi[a];
+      });
+      leave = first_true(enter, kMaxCandidate, [&](int64_t k) {
+        count();
+        return coord(r, k, a) < lo[a];
+      });
     }
     out.begin = std::max(out.begin, enter);
     out.end = std::min(out.end, leave);

@@ -1,0 +1,61 @@
+#pragma once
+// CFIU, the conflict-free interpolation unit (paper Sections III-C, IV-F,
+// Fig. 15).
+//
+// Holds the feature cache (lines, MSHR, reservation monitor, bank layout; see
+// feature_cache.h) and interpolates a sample's feature from the 8 corners of
+// its micro voxel. The corners are read from the banks the layout assigns
+// them (8 different banks: one cycle); the trilinear coefficients are
+// reordered into bank order to meet them.
+//
+// Numerics (ChipNumerics): per axis the SCC gives the fraction f with
+// fb = interp_fraction_bits bits; a corner's coefficient is the product of
+// f or (1 - f) over the axes, exact in 3 fb fraction bits (they sum to one).
+// The interpolated feature of channel c is
+//   round(sum_corners coef * (code - zero_point[c]))
+// rounded once to interp_feature_frac_bits and saturated to
+// interp_feature_bits: a feature in feature-code steps. The sum is exact, so
+// bank order, and so the bank mapping, never changes the result.
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "chip/feature_cache.h"
+#include "chip/numerics.h"
+#include "chip/oo_si.h"
+#include "model/scene_model.h"
+
+namespace edrnr::chip {
+
+struct CfiuCounters {
+  uint64_t samples = 0;
+  uint64_t corner_reads = 0;     // vertex vectors read from the banks
+  uint64_t fetch_cycles = 0;     // bank access cycles: 1 per sample without conflicts
+  uint64_t conflict_cycles = 0;  // extra cycles from two corners in one bank
+  std::array<uint64_t, kFeatureBanks> bank_reads{};
+};
+
+class Cfiu {
+ public:
+  // Throws Error if the model has no INT4 features.
+  Cfiu(const SceneModel& model, const ChipNumerics& numerics, const FeatureCacheConfig& cache);
+
+  FeatureCache& cache() { return cache_; }
+  const FeatureCache& cache() const { return cache_; }
+
+  // Writes F interpolated features of a sample in `block`, whose line must be
+  // valid and reserved (CacheAccess and fill before; see FeatureCache).
+  void interpolate(uint32_t block, const SampleCoord& s, int32_t* out);
+
+  int feature_channels() const { return channels_; }
+  const CfiuCounters& counters() const { return counters_; }
+
+ private:
+  const SceneModel& model_;
+  ChipNumerics numerics_;
+  FeatureCache cache_;
+  int channels_;
+  CfiuCounters counters_;
+};
+
+}  // namespace edrnr::chip

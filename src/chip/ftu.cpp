@@ -1,0 +1,125 @@
+#include "chip/ftu.h"
+
+#include "chip/ctu.h"
+#include "chip/lfau.h"
+#include "core/error.h"
+
+namespace edrnr::chip {
+
+namespace {
+constexpr int kLeafCellMicro = 2;
+
+int micro_bit(int lx, int ly, int lz) { return lx + kMicroPerFine * (ly + kMicroPerFine * lz); }
+
+bool leaf_occupied(uint64_t word, int leaf_x, int leaf_y, int leaf_z) {
+  for (int c = 0; c < 8; ++c)
+    if (word >> micro_bit(2 * leaf_x + (c & 1), 2 * leaf_y + (c >> 1 & 1), 2 * leaf_z + (c >> 2 & 1)) & 1) return true;
+  return false;
+}
+}  // namespace
+
+Ftu::Ftu(const SceneModel& model, const RayMath& math, bool lag_first, size_t micro_grid_cache_words)
+    : model_(model), math_(math), lag_first_(lag_first), micro_grid_cache_(micro_grid_cache_words) {
+  const Bitmap3& fine = model.occupancy[int(Tier::Fine)];
+  const Bitmap3& micro = model.occupancy[int(Tier::Micro)];
+  const int fr = fine.res();
+  micro_words_.assign(fine.size(), 0);
+  for (int z = 0; z < fr; ++z)
+    for (int y = 0; y < fr; ++y)
+      for (int x = 0; x < fr; ++x) {
+        const size_t f = fine.index(x, y, z);
+        if (!fine.get(f)) continue;
+        if (model.fine_to_block.size() != fine.size() || model.fine_to_block[f] < 0)
+          fail("model: occupied fine voxel ({}, {}, {}) has no feature block", x, y, z);
+        uint64_t w = 0;
+        for (int lz = 0; lz < kMicroPerFine; ++lz)
+          for (int ly = 0; ly < kMicroPerFine; ++ly)
+            for (int lx = 0; lx < kMicroPerFine; ++lx)
+              if (micro.get(4 * x + lx, 4 * y + ly, 4 * z + lz)) w |= uint64_t(1) << micro_bit(lx, ly, lz);
+        micro_words_[f] = w;
+      }
+}
+
+bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& batch) {
+  const Bitmap3& fine = model_.occupancy[int(Tier::Fine)];
+  const int cr = model_.coarse_res();
+  for (;;) {
+    // The live rays inside the CV, and their fine voxels.
+    uint8_t active = 0;
+    std::array<Vec3i, kRaysPerPacket> fv{};
+    for (int r = 0; r < kRaysPerPacket; ++r) {
+      const RayState& ray = rp.rays[size_t(r)];
+      if (!ray.live()) continue;
+      const Vec3i f = math_.cell_at(ray.ray, ray.k, kMicroPerFine);
+      const Vec3i c{f.x / kFinePerCoarse, f.y / kFinePerCoarse, f.z / kFinePerCoarse};
+      if (linear_index(c.x, c.y, c.z, cr) != cv_tag) continue;
+      active |= uint8_t(1u << r);
+      fv[size_t(r)] = f;
+    }
+    if (!active) return false;
+    const LfauSelection sel = lfau_select(fv, active, rp.travel_sign, lag_first_);
+    ++counters_.iterations;
+    counters_.rays_advanced += uint64_t(sel.selected_rays());
+    ++counters_.fine_checks;
+    const uint32_t fine_index = uint32_t(fine.index(sel.voxel.x, sel.voxel.y, sel.voxel.z));
+    if (!fine.get(fine_index)) {
+      for (int r = 0; r < kRaysPerPacket; ++r) {
+        if (!(sel.selected_mask >> r & 1)) continue;
+        RayState& ray = rp.rays[size_t(r)];
+        ray.k = math_.cell_exit(ray.ray, ray.k, ray.k_end, sel.voxel, kMicroPerFine, &counters_.position_evals);
+      }
+      continue;
+    }
+    // Occupied fine voxel: one micro-grid word serves the leaf and micro checks.
+    const uint64_t word = micro_words_[fine_index];
+    ++counters_.micro_word_reads;
+    counters_.micro_word_hits += micro_grid_cache_.access(fine_index);
+    batch.rp = rp_pointer;
+    batch.cv_tag = cv_tag;
+    batch.fine_index = fine_index;
+    batch.block = model_.fine_to_block[fine_index];
+    batch.ray_mask = sel.selected_mask;
+    batch.samples.clear();
+    const Vec3i base{kMicroPerFine * sel.voxel.x, kMicroPerFine * sel.voxel.y, kMicroPerFine * sel.voxel.z};
+    for (int r = 0; r < kRaysPerPacket; ++r) {
+      if (!(sel.selected_mask >> r & 1)) continue;
+      RayState& ray = rp.rays[size_t(r)];
+      const int64_t k_exit =
+          math_.cell_exit(ray.ray, ray.k, ray.k_end, sel.voxel, kMicroPerFine, &counters_.position_evals);
+      int64_t k = ray.k;
+      while (k < k_exit) {
+        const Vec3i m = math_.micro_voxel(math_.point(ray.ray, k));
+        ++counters_.position_evals;
+        const Vec3i leaf{(m.x - base.x) / 2, (m.y - base.y) / 2, (m.z - base.z) / 2};
+        ++counters_.leaf_checks;
+        if (!leaf_occupied(word, leaf.x, leaf.y, leaf.z)) {
+          const Vec3i leaf_cell{m.x / kLeafCellMicro, m.y / kLeafCellMicro, m.z / kLeafCellMicro};
+          k = math_.cell_exit(ray.ray, k, k_exit, leaf_cell, kLeafCellMicro, &counters_.position_evals);
+          continue;
+        }
+        // Occupied leaf: test each candidate until the ray leaves the leaf.
+        const Vec3i leaf_cell{m.x / kLeafCellMicro, m.y / kLeafCellMicro, m.z / kLeafCellMicro};
+        Vec3i last_micro{-1, -1, -1};
+        bool last_occupied = false;
+        for (; k < k_exit; ++k) {
+          const Vec3i mk = math_.micro_voxel(math_.point(ray.ray, k));
+          ++counters_.position_evals;
+          if (Vec3i{mk.x / kLeafCellMicro, mk.y / kLeafCellMicro, mk.z / kLeafCellMicro} != leaf_cell) break;
+          if (mk != last_micro) {
+            ++counters_.micro_checks;
+            last_micro = mk;
+            last_occupied = word >> micro_bit(mk.x - base.x, mk.y - base.y, mk.z - base.z) & 1;
+          }
+          if (last_occupied) batch.samples.push_back({uint8_t(r), k});
+        }
+      }
+      ray.k = k_exit;
+    }
+    if (batch.samples.empty()) continue;
+    counters_.samples += batch.samples.size();
+    ++counters_.batches;
+    return true;
+  }
+}
+
+}  // namespace edrnr::chip

@@ -1,0 +1,52 @@
+#include "chip/oo_si.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+#include "core/error.h"
+#include "model/scene_model.h"
+
+namespace edrnr::chip {
+
+OooSi::OooSi(int depth, bool out_of_order) : depth_(depth), out_of_order_(out_of_order) {
+  if (depth < 1) fail("OoO-SI queue depth must be at least 1 (got {})", depth);
+}
+
+void OooSi::push(const LsEntry& entry) {
+  if (full()) throw std::logic_error("OoO-SI push: the location shifter is full");
+  queue_.push_back(entry);
+  ++counters_.pushed;
+  counters_.peak_occupancy = std::max<uint64_t>(counters_.peak_occupancy, queue_.size());
+}
+
+std::optional<int> OooSi::select(const FeatureCache& cache) {
+  const int n = out_of_order_ ? size() : std::min(size(), 1);
+  for (int i = 0; i < n; ++i)
+    if (cache.present(queue_[size_t(i)].block)) return i;
+  ++counters_.waits;
+  return std::nullopt;
+}
+
+LsEntry OooSi::take(int position) {
+  if (position < 0 || position >= size()) throw std::logic_error("OoO-SI take: no entry at that position");
+  LsEntry e = queue_[size_t(position)];
+  queue_.erase(queue_.begin() + position);
+  ++counters_.issued;
+  if (position > 0) ++counters_.issued_out_of_order;
+  return e;
+}
+
+SampleCoord sample_coordinate(const RayMath& math, const ChipRay& ray, int64_t k, int frac_bits,
+                              fx::Rounding rounding) {
+  const Vec3d p = math.point(ray, k);
+  SampleCoord s;
+  s.micro = math.micro_voxel(p);
+  for (int a = 0; a < 3; ++a) {
+    s.local[a] = s.micro[a] % kMicroPerFine;
+    const double f = std::clamp(p[a] - double(s.micro[a]), 0.0, 1.0);  // exact: p has few significant bits
+    s.frac[size_t(a)] = fx::to_fixed_unsigned(f, frac_bits, frac_bits + 1, rounding);
+  }
+  return s;
+}
+
+}  // namespace edrnr::chip

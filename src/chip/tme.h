@@ -1,0 +1,101 @@
+#pragma once
+// TME, the tiny MLP engine (paper Section IV-A): evaluates the current coarse
+// voxel's MLP on an interpolated feature, in integers.
+//
+// The chip form of a model MLP (MlpQ) is what the MLP cache holds: per layer
+// the INT8 weights and, per output neuron, an INT32 bias (in accumulator
+// units) and a fixed-point requantization multiplier (fx::Requant with
+// requant_multiplier_bits), as MlpArch::q8_bytes counts; plus the input-stage
+// multipliers of the two nets: one per feature channel (interpolated feature
+// to the density net's INT8 input), one for the density outputs and one for
+// the direction encoding (to the colour net's INT8 input). With DenseQ's
+// meaning (weight = w_q * w_scale[row], input step in_scale):
+//   acc       = bias + sum w_q x_q   (accumulator_bits, saturating each add)
+//   hidden    x'_q = sat(round(relu(acc) * w_scale in_scale / in_scale_next))
+//   outputs   raw  = sat(round(acc * w_scale in_scale * 2^out_frac)), mlp_output_bits
+// The raw density goes through the alpha LUT (alpha = 1 - exp(-exp(raw)
+// delta): delta is constant, so one table on the raw density), the raw
+// colours through the sigmoid LUT. The MLP cache holds one MLP: switching to
+// another coarse voxel's MLP is one load.
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "chip/activation_lut.h"
+#include "chip/numerics.h"
+#include "core/vec.h"
+#include "model/scene_model.h"
+
+namespace edrnr::chip {
+
+struct TmeLayer {
+  int in = 0, out = 0;
+  std::vector<int8_t> w;             // out * in, row-major
+  std::vector<int64_t> bias;         // out, INT32 in accumulator units
+  std::vector<fx::Requant> requant;  // out: to the next layer's input, or to the raw output format
+};
+
+struct TmeMlp {
+  std::vector<TmeLayer> density, color;
+  std::vector<fx::Requant> feature_in;  // F: interpolated feature -> density net input
+  fx::Requant geo_in;                   // raw density-net output -> colour net input
+  fx::Requant dir_in;                   // direction code -> colour net input
+  size_t stored_bytes = 0;              // q8_bytes + 4 bytes per input-stage multiplier
+};
+
+// The widest layer (inputs or outputs) the TME evaluates.
+inline constexpr int kMaxLayerWidth = 256;
+
+// The chip form of MLP `index` of the model. Throws Error naming the MLP,
+// net, layer and neuron when a layer is wider than kMaxLayerWidth, a scale is
+// negative or not finite, or a multiplier cannot be expressed with
+// requant_multiplier_bits.
+TmeMlp compile_tme_mlp(const SceneModel& model, size_t index, const ChipNumerics& numerics);
+
+struct TmeOutput {
+  int64_t raw_density = 0;       // mlp_output_frac_bits fraction bits
+  int64_t alpha = 0;             // Q1.(alpha_bits-1)
+  std::array<int64_t, 3> rgb{};  // Q1.(color_bits-1)
+};
+
+struct TmeCounters {
+  uint64_t samples = 0;
+  uint64_t macs = 0;
+  uint64_t mlp_loads = 0;  // MLP cache fills
+  uint64_t mlp_load_bytes = 0;
+  uint64_t saturations = 0;  // accumulator or output values clipped
+};
+
+class Tme {
+ public:
+  // delta: sample spacing in scene units. Throws Error if the model has no
+  // INT8 MLPs or one does not fit mlp_cache_bytes.
+  Tme(const SceneModel& model, const ChipNumerics& numerics, double delta, size_t mlp_cache_bytes);
+
+  // Makes the MLP of CV `cv_tag` current (a load when it is not already).
+  void load(uint32_t cv_tag);
+  // Evaluates the current MLP. feature: F interpolated features (CFIU
+  // format); dir_code: the ray's direction encoding (encode_direction).
+  TmeOutput eval(const int32_t* feature, const std::vector<int32_t>& dir_code);
+
+  // Direction encoding [d, sin(2^k d), cos(2^k d) for k < L] as signed
+  // direction_code_bits codes with direction_code_frac_bits fraction bits.
+  static std::vector<int32_t> encode_direction(const Vec3d& dir, int frequencies, const ChipNumerics& numerics);
+
+  const TmeMlp& mlp(size_t i) const { return mlps_[i]; }
+  const ActivationLut& alpha_lut() const { return alpha_lut_; }
+  const ActivationLut& sigmoid_lut() const { return sigmoid_lut_; }
+  const TmeCounters& counters() const { return counters_; }
+
+ private:
+  void layer(const TmeLayer& L, const int64_t* x, int64_t* y, bool hidden, int out_bits);
+
+  const SceneModel& model_;
+  ChipNumerics n_;
+  std::vector<TmeMlp> mlps_;
+  ActivationLut alpha_lut_, sigmoid_lut_;
+  int32_t current_ = -1;
+  TmeCounters counters_;
+};
+
+}  // namespace edrnr::chip
