@@ -13,6 +13,7 @@
 #include "core/error.h"
 #include "core/file_io.h"
 #include "model/mlp.h"
+#include "render/traversal.h"
 #include "train/adam.h"
 #include "train/checkpoint_io.h"
 #include "train/feature_grid.h"
@@ -83,9 +84,9 @@ inline float sigmoid(float z) { return 1.f / (1.f + std::exp(-z)); }
 // Rays and samples of one step (reused between steps).
 struct Batch {
   int n_rays = 0;
-  std::vector<double> ray_o, ray_d;  // 3 per ray, world units
-  std::vector<float> target;         // 3 per ray
-  std::vector<float> dir_enc;        // dir_dims per ray
+  std::vector<MicroRay> mray;  // each ray in micro-grid units (the renderer's sampling)
+  std::vector<float> target;   // 3 per ray
+  std::vector<float> dir_enc;  // dir_dims per ray
   std::vector<int32_t> k_next, k_last;
   std::vector<float> trans;
   std::vector<uint8_t> alive;
@@ -154,7 +155,8 @@ struct Trainer::State {
   MlpArch arch;
   MlpLayout layout;
   int F = 0, G = 0, DD = 0;
-  double delta = 0;                   // world units between candidate samples
+  SceneModel geometry;  // scene box and micro resolution only: the renderer's sampling helpers take a model
+  float delta = 0;      // scene units between candidate samples
   std::vector<uint64_t> pixel_start;  // prefix sums of pixels per frame
 
   int64_t step = 0;
@@ -191,7 +193,9 @@ struct Trainer::State {
     F = cfg.feature_channels();
     G = cfg.geo_features;
     DD = arch.dir_dims();
-    delta = double(cfg.step_micro) * (double(cfg.scene_box.hi.x) - double(cfg.scene_box.lo.x)) / cfg.micro_res;
+    geometry.scene_box = cfg.scene_box;
+    geometry.micro_res = cfg.micro_res;
+    delta = sample_spacing(geometry, cfg.step_micro);
     if (data.frames.empty()) fail("dataset {}: no frames to train on", data.root.string());
     pixel_start.push_back(0);
     for (const auto& f : data.frames) {
@@ -234,10 +238,7 @@ struct Trainer::State {
   // --- rays ---------------------------------------------------------------
 
   void set_ray(Batch& b, int i, const Ray& r) {
-    for (int a = 0; a < 3; ++a) {
-      b.ray_o[3 * size_t(i) + size_t(a)] = r.origin[a];
-      b.ray_d[3 * size_t(i) + size_t(a)] = r.dir[a];
-    }
+    b.mray[size_t(i)] = make_micro_ray(geometry, r, delta);
     encode_direction(Vec3f{float(r.dir.x), float(r.dir.y), float(r.dir.z)}, cfg.dir_frequencies,
                      &b.dir_enc[size_t(i) * size_t(DD)]);
     // Candidate range inside the object AABB (the scene box until it is known).
@@ -250,8 +251,8 @@ struct Trainer::State {
     double t0, t1;
     int32_t k0 = 0, k1 = -1;
     if (intersect_box(r.origin, r.dir, box, t0, t1) && t1 > 0) {
-      k0 = int32_t(std::max(0.0, std::ceil(t0 / delta - 0.5) - 1));
-      k1 = int32_t(std::floor(t1 / delta - 0.5) + 1);
+      k0 = int32_t(std::max(0.0, std::ceil(t0 / double(delta) - 0.5) - 1));
+      k1 = int32_t(std::floor(t1 / double(delta) - 0.5) + 1);
     }
     b.k_next[size_t(i)] = k0;
     b.k_last[size_t(i)] = k1;
@@ -261,8 +262,7 @@ struct Trainer::State {
 
   void resize_rays(Batch& b, int n) {
     b.n_rays = n;
-    b.ray_o.resize(3 * size_t(n));
-    b.ray_d.resize(3 * size_t(n));
+    b.mray.resize(size_t(n));
     b.target.resize(3 * size_t(n));
     b.dir_enc.resize(size_t(n) * size_t(DD));
     b.k_next.resize(size_t(n));
@@ -294,17 +294,8 @@ struct Trainer::State {
 
   // --- sampling -------------------------------------------------------------
 
-  // Position of candidate k of ray i in micro-grid units.
-  Vec3f candidate(const Batch& b, int i, int32_t k) const {
-    const double t = (double(k) + 0.5) * delta;
-    const double inv = double(cfg.micro_res) / (double(cfg.scene_box.hi.x) - double(cfg.scene_box.lo.x));
-    Vec3f p;
-    for (int a = 0; a < 3; ++a) {
-      const double w = b.ray_o[3 * size_t(i) + size_t(a)] + t * b.ray_d[3 * size_t(i) + size_t(a)];
-      p[a] = float((w - double(cfg.scene_box.lo[a])) * inv);
-    }
-    return p;
-  }
+  // Position of candidate k of ray i in micro-grid units (exactly as the renderer computes it).
+  Vec3f candidate(const Batch& b, int i, int32_t k) const { return b.mray[size_t(i)].point(k); }
 
   int32_t mlp_of_micro(int x, int y, int z) const {
     if (phase == Phase::Main) return 0;
@@ -399,7 +390,7 @@ struct Trainer::State {
         std::vector<float> raw(static_cast<size_t>(c));
         for (int j = 0; j < c; ++j) raw[size_t(j)] = b.geo[(size_t(begin[li]) + size_t(j)) * size_t(G)];
         float T;
-        const int u = march_transmittance(raw.data(), c, float(delta), cfg.transmittance_min, b.trans[size_t(i)], &T);
+        const int u = march_transmittance(raw.data(), c, delta, cfg.transmittance_min, b.trans[size_t(i)], &T);
         b.trans[size_t(i)] = T;
         used[li] = u;
         for (int j = 0; j < u; ++j) b.active[size_t(begin[li]) + size_t(j)] = 1;
@@ -524,7 +515,7 @@ struct Trainer::State {
           raw[size_t(j)] = b.geo[s * size_t(G)];
           for (int c = 0; c < 3; ++c) rgb[3 * size_t(j) + size_t(c)] = b.rgb[3 * s + size_t(c)];
         }
-        const CompositeResult r = composite(raw.data(), rgb.data(), cnt, float(delta), cfg.background);
+        const CompositeResult r = composite(raw.data(), rgb.data(), cnt, delta, cfg.background);
         double se = 0;
         float d_pixel[3];
         for (int c = 0; c < 3; ++c) {
@@ -537,8 +528,7 @@ struct Trainer::State {
         if (!with_grad || cnt == 0) continue;
         d_raw.resize(size_t(cnt));
         d_rgb.resize(3 * size_t(cnt));
-        composite_backward(raw.data(), rgb.data(), cnt, float(delta), cfg.background, d_pixel, d_raw.data(),
-                           d_rgb.data());
+        composite_backward(raw.data(), rgb.data(), cnt, delta, cfg.background, d_pixel, d_raw.data(), d_rgb.data());
         for (int j = 0; j < cnt; ++j) {
           const size_t s = size_t(b.order[size_t(first + j)]);
           b.d_raw[s] = d_raw[size_t(j)];
@@ -649,7 +639,7 @@ struct Trainer::State {
   // --- occupancy ------------------------------------------------------------
 
   float occupancy_threshold() const {
-    const float t = -std::log(1.f - cfg.occupancy_alpha) / float(delta);
+    const float t = -std::log(1.f - cfg.occupancy_alpha) / delta;
     const double mean = occ.mean_density();
     return occ_updates >= kSweepParts ? std::min(t, float(mean)) : t;
   }
@@ -1061,6 +1051,11 @@ Trainer::Trainer(const Dataset& data, const std::vector<uint8_t>& checkpoint, co
 }
 
 Trainer::~Trainer() = default;
+
+TrainConfig Trainer::checkpoint_config(const std::vector<uint8_t>& checkpoint, const std::string& source) {
+  CheckpointReader r(checkpoint, source);
+  return parse_train_config(r.get_string("config"), source + " (config)");
+}
 
 const TrainConfig& Trainer::config() const { return s_->cfg; }
 bool Trainer::done() const { return s_->phase == Phase::Done; }

@@ -69,6 +69,8 @@ class Trainer {
   // be the one the checkpoint was made from (Error otherwise).
   Trainer(const Dataset& data, const std::vector<uint8_t>& checkpoint, const std::string& source);
   ~Trainer();
+  // The settings stored in checkpoint bytes (to load the dataset as the run did).
+  static TrainConfig checkpoint_config(const std::vector<uint8_t>& checkpoint, const std::string& source);
   Trainer(const Trainer&) = delete;
   Trainer& operator=(const Trainer&) = delete;
 

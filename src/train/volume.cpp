@@ -8,7 +8,7 @@ int march_transmittance(const float* raw, int n, float delta, float t_min, float
   float T = t_in;
   int i = 0;
   while (i < n) {
-    T *= 1.f - alpha_of_sigma(sigma_of_raw(raw[i]), delta);
+    T *= std::exp(-(sigma_of_raw(raw[i]) * delta));
     ++i;
     if (T < t_min) break;
   }
@@ -20,10 +20,10 @@ CompositeResult composite(const float* raw, const float* rgb, int n, float delta
   CompositeResult r;
   float T = 1.f;
   for (int i = 0; i < n; ++i) {
-    const float a = alpha_of_sigma(sigma_of_raw(raw[i]), delta);
-    const float w = T * a;
+    const float tau = sigma_of_raw(raw[i]) * delta;
+    const float w = T * alpha_of_tau(tau);
     for (int c = 0; c < 3; ++c) r.rgb[c] += w * rgb[3 * i + c];
-    T *= 1.f - a;
+    T *= std::exp(-tau);
   }
   for (int c = 0; c < 3; ++c) r.rgb[c] += T * background[c];
   r.t_final = T;
@@ -37,8 +37,9 @@ void composite_backward(const float* raw, const float* rgb, int n, float delta, 
   std::vector<float> T(static_cast<size_t>(n) + 1), a(static_cast<size_t>(n));
   T[0] = 1.f;
   for (int i = 0; i < n; ++i) {
-    a[size_t(i)] = alpha_of_sigma(sigma_of_raw(raw[i]), delta);
-    T[size_t(i) + 1] = T[size_t(i)] * (1.f - a[size_t(i)]);
+    const float tau = sigma_of_raw(raw[i]) * delta;
+    a[size_t(i)] = alpha_of_tau(tau);
+    T[size_t(i) + 1] = T[size_t(i)] * std::exp(-tau);
   }
   float S[3];
   for (int c = 0; c < 3; ++c) S[c] = T[size_t(n)] * background[c];

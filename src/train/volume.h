@@ -1,9 +1,9 @@
 #pragma once
 // Volume rendering of one ray, eq. (1)-(2), exactly as the reference renderer
-// composites (render/reference.h): sigma = exp(clamp(raw)), alpha = 1 -
-// exp(-sigma delta), T_{i+1} = T_i (1 - alpha_i); marching stops after the
-// sample that brings T below transmittance_min; pixel = sum T_i alpha_i c_i +
-// T_final background. And its exact gradient.
+// composites (render/reference.cpp): sigma = exp(clamp(raw)), tau = sigma
+// delta, alpha = -expm1(-tau), T_{i+1} = T_i exp(-tau); marching stops after
+// the sample that brings T below transmittance_min; pixel = sum T_i alpha_i
+// c_i + T_final background. And its exact gradient.
 #include <cmath>
 
 #include "model/mlp.h"
@@ -11,7 +11,7 @@
 namespace edrnr::train {
 
 inline float sigma_of_raw(float raw) { return std::exp(std::clamp(raw, kRawSigmaMin, kRawSigmaMax)); }
-inline float alpha_of_sigma(float sigma, float delta) { return 1.f - std::exp(-sigma * delta); }
+inline float alpha_of_tau(float tau) { return -std::expm1(-tau); }
 
 // Transmittance after n samples of raw density starting from T = t_in. Returns
 // the number of samples used: the index of the first sample after which T <

@@ -1,0 +1,185 @@
+// edrnr train: learns a scene model from a NeRF dataset on the CPU and writes
+// the quantized (INT4 features, INT8 MLPs) model; the float model on request.
+#include <fmt/format.h>
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "commands.h"
+#include "core/error.h"
+#include "core/file_io.h"
+#include "core/metrics.h"
+#include "data/dataset.h"
+#include "model/model_io.h"
+#include "render/reference.h"
+#include "train/trainer.h"
+
+namespace edrnr::cli {
+namespace {
+
+std::atomic<bool> g_interrupt{false};
+extern "C" void on_sigint(int) { g_interrupt.store(true); }
+
+struct TrainCmdOptions {
+  std::string dataset, output, float_output, config, resume, checkpoint;
+  double minutes = 0, checkpoint_minutes = 5;
+  int64_t iters = 0, stop_after = -1;
+  uint64_t seed = 0;
+  int threads = 0, downscale = 0, eval_views = 0;
+  CLI::Option *minutes_opt, *iters_opt, *seed_opt, *downscale_opt, *config_opt;
+};
+
+double peak_rss_gib() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_maxrss) / (1024.0 * 1024.0);  // ru_maxrss is in KiB on Linux
+}
+
+// Mean PSNR of a model over the first `n` views of a split.
+double eval_split(const SceneModel& model, const std::filesystem::path& root, const train::TrainConfig& cfg, int n,
+                  int threads) {
+  DatasetOptions d;
+  d.split = "test";
+  d.downscale = cfg.downscale;
+  for (int c = 0; c < 3; ++c) d.background[c] = cfg.background[c];
+  const Dataset ds = load_dataset(root, d);
+  RenderSettings rs;
+  rs.step_micro = cfg.step_micro;
+  rs.transmittance_min = cfg.transmittance_min;
+  for (int c = 0; c < 3; ++c) rs.background[c] = cfg.background[c];
+  rs.threads = threads;
+  const int views = std::min<int>(n, int(ds.frames.size()));
+  double sum = 0;
+  for (int v = 0; v < views; ++v)
+    sum += psnr(render_reference(model, ds.frames[size_t(v)].camera, rs), ds.frames[size_t(v)].image);
+  return views ? sum / views : 0.0;
+}
+
+void run_train(const TrainCmdOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (o.threads < 0) fail("--threads {}: must be 0 (all cores) or more", o.threads);
+  if (!(o.checkpoint_minutes > 0)) fail("--checkpoint-minutes {}: must be positive", o.checkpoint_minutes);
+  if (o.eval_views < 0) fail("--eval-views {}: must not be negative", o.eval_views);
+  const bool resuming = !o.resume.empty();
+  if (resuming && (o.config_opt->count() || o.iters_opt->count() || o.minutes_opt->count() || o.seed_opt->count() ||
+                   o.downscale_opt->count()))
+    fail(
+        "--resume continues with the checkpoint's settings: --config, --iters, --minutes, --seed and --downscale "
+        "cannot change them");
+
+  std::vector<uint8_t> ckpt;
+  train::TrainConfig cfg;
+  if (resuming) {
+    ckpt = read_file_bytes(o.resume);
+    // The dataset must be loaded as the checkpoint's run loaded it.
+    cfg = train::Trainer::checkpoint_config(ckpt, o.resume);
+  } else {
+    if (!o.config.empty()) cfg = train::load_train_config(o.config);
+    if (o.iters_opt->count()) {
+      if (o.iters < 1) fail("--iters {}: must be at least 1", o.iters);
+      cfg.iters = o.iters;
+      cfg.minutes = 0;
+    }
+    if (o.minutes_opt->count()) {
+      if (!(o.minutes > 0)) fail("--minutes {}: must be positive", o.minutes);
+      cfg.minutes = o.minutes;
+    }
+    if (o.seed_opt->count()) cfg.seed = o.seed;
+    if (o.downscale_opt->count()) {
+      if (o.downscale < 1) fail("--downscale {}: must be a positive integer", o.downscale);
+      cfg.downscale = o.downscale;
+    }
+    cfg.validate();
+  }
+
+  const bool tty = isatty(STDERR_FILENO) != 0;
+  auto say = [&](const std::string& m) {
+    if (tty) fmt::print(stderr, "{}\n", m);
+  };
+  DatasetOptions d;
+  d.split = cfg.split;
+  d.downscale = cfg.downscale;
+  for (int c = 0; c < 3; ++c) d.background[c] = cfg.background[c];
+  say(fmt::format("loading {} ({} split, downscale {})", o.dataset, cfg.split, cfg.downscale));
+  const Dataset data = load_dataset(o.dataset, d);
+
+  std::unique_ptr<train::Trainer> trainer =
+      resuming ? std::make_unique<train::Trainer>(data, ckpt, o.resume) : std::make_unique<train::Trainer>(data, cfg);
+  ckpt.clear();
+  ckpt.shrink_to_fit();
+
+  train::TrainOptions opt;
+  opt.threads = o.threads;
+  opt.checkpoint_path = std::filesystem::path(o.checkpoint.empty() ? o.output + ".ckpt" : o.checkpoint);
+  opt.checkpoint_minutes = o.checkpoint_minutes;
+  opt.progress = tty;
+  opt.stop_after = o.stop_after;
+  opt.interrupt = &g_interrupt;
+  opt.log = say;
+  g_interrupt.store(false);
+  auto previous = std::signal(SIGINT, on_sigint);
+  bool done;
+  try {
+    done = trainer->run(opt);
+  } catch (...) {
+    std::signal(SIGINT, previous);
+    throw;
+  }
+  std::signal(SIGINT, previous);
+  const train::TrainStats st = trainer->stats();
+  if (!done) {
+    fmt::print("stopped at step {}/{}; checkpoint written to {}\n", st.step, st.iters, opt.checkpoint_path.string());
+    fmt::print("continue with: edrnr train {} -o {} --resume {}\n", o.dataset, o.output, opt.checkpoint_path.string());
+    if (g_interrupt.load()) throw Error("interrupted");
+    return;
+  }
+  const SceneModel quantized = trainer->export_model(true);
+  save_model(o.output, quantized);
+  SceneModel float_model;
+  if (!o.float_output.empty() || o.eval_views > 0) float_model = trainer->export_model(false);
+  if (!o.float_output.empty()) save_model(o.float_output, float_model);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  fmt::print("trained {} steps in {:.1f} min: {} blocks, {} MLPs; peak memory {:.2f} GiB\n", st.step, seconds / 60,
+             st.blocks, st.mlps, peak_rss_gib());
+  fmt::print("training PSNR (running): float {:.2f} dB, quantized {:.2f} dB\n", st.psnr_float, st.psnr_quantized);
+  fmt::print("wrote {}{}\n", o.output, o.float_output.empty() ? "" : " and " + o.float_output);
+  if (o.eval_views > 0) {
+    const double pf = eval_split(float_model, o.dataset, trainer->config(), o.eval_views, o.threads);
+    const double pq = eval_split(quantized, o.dataset, trainer->config(), o.eval_views, o.threads);
+    fmt::print("test PSNR ({} views): float {:.2f} dB, quantized {:.2f} dB\n", o.eval_views, pf, pq);
+  }
+  std::error_code ec;
+  std::filesystem::remove(opt.checkpoint_path, ec);  // the run finished: its checkpoint is no longer needed
+}
+
+void register_train_cmd(CLI::App& app) {
+  auto o = std::make_shared<TrainCmdOptions>();
+  CLI::App* cmd = app.add_subcommand("train", "Learn a scene model from a NeRF dataset (CPU), quantization-aware");
+  cmd->add_option("dataset", o->dataset, "NeRF dataset folder (transforms_train.json and images)")->required();
+  cmd->add_option("-o,--output", o->output, "the quantized .edrnr model to write")->required();
+  o->config_opt = cmd->add_option("--config", o->config, "YAML preset (configs/train/*.yaml); flags override it");
+  o->minutes_opt = cmd->add_option("--minutes", o->minutes, "time budget: the step count is fitted to it");
+  o->iters_opt = cmd->add_option("--iters", o->iters, "training steps (overrides the preset and --minutes)");
+  o->seed_opt = cmd->add_option("--seed", o->seed, "random seed");
+  o->downscale_opt = cmd->add_option("--downscale", o->downscale, "integer image downscale factor");
+  cmd->add_option("--resume", o->resume, "continue from this checkpoint (same dataset)");
+  cmd->add_option("--checkpoint", o->checkpoint, "checkpoint file (default: <output>.ckpt)");
+  cmd->add_option("--checkpoint-minutes", o->checkpoint_minutes, "minutes between checkpoints")->capture_default_str();
+  cmd->add_option("--float-output", o->float_output, "also write the float model here");
+  cmd->add_option("--eval-views", o->eval_views, "after training, report test-split PSNR over this many views")
+      ->capture_default_str();
+  cmd->add_option("--stop-after", o->stop_after, "checkpoint and stop after this many steps (for resuming later)");
+  cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();
+  cmd->callback([o] { run_train(*o); });
+}
+
+Registrar reg{60, register_train_cmd};
+
+}  // namespace
+}  // namespace edrnr::cli
