@@ -76,6 +76,14 @@ class Writer {
     const uint8_t* b = static_cast<const uint8_t*>(p);
     buf_.insert(buf_.end(), b, b + n);
   }
+  void f32s(const std::vector<float>& v) {
+    size_t at = buf_.size();
+    buf_.resize(at + 4 * v.size());
+    for (size_t i = 0; i < v.size(); ++i) {
+      uint32_t bits = std::bit_cast<uint32_t>(v[i]);
+      for (int k = 0; k < 4; ++k) buf_[at + 4 * i + size_t(k)] = uint8_t(bits >> (8 * k));
+    }
+  }
   void pad_to(size_t align) {
     while (buf_.size() % align) buf_.push_back(0);
   }
@@ -327,9 +335,7 @@ void write_box(Writer& w, const Box3f& b) {
   for (int a = 0; a < 3; ++a) w.f32(b.hi[a]);
 }
 
-void write_floats(Writer& w, const std::vector<float>& v) {
-  for (float x : v) w.f32(x);
-}
+void write_floats(Writer& w, const std::vector<float>& v) { w.f32s(v); }
 
 std::vector<uint8_t> encode_section(const SceneModel& m, int s) {
   Writer w;
