@@ -43,7 +43,9 @@ SampleMarcher::SampleMarcher(const SceneModel& model, const Ray& ray, const Micr
   }
   const Box3d region{lo + vs * (v_lo - Vec3d{1, 1, 1}), lo + vs * (v_hi + Vec3d{1, 1, 1})};
   double t_near, t_far;
-  if (!intersect_box(ray.origin, ray.dir, region, t_near, t_far) || t_far < 0) return;  // k_ > k_end_
+  if (!intersect_box(ray.origin, ray.dir, region, t_near, t_far) || !(t_far >= 0) || !std::isfinite(t_far) ||
+      !std::isfinite(t_near))
+    return;  // no candidates: k_ > k_end_
   const double delta = double(ray_.delta);
   k_ = std::max<int64_t>(0, int64_t(std::floor(std::max(t_near, 0.0) / delta - 0.5)) - 1);
   k_end_ = int64_t(std::ceil(t_far / delta - 0.5)) + 1;

@@ -246,6 +246,9 @@ TEST(Reference, BadInputsAreErrors) {
   EXPECT_THROW(render_reference(m, cam, s), Error);
   s = RenderSettings{};
   EXPECT_THROW(render_reference(m, top_camera(0, 10), s), Error);
+  Camera degenerate = cam;
+  degenerate.c2w = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 4, 0, 0, 0, 1};
+  EXPECT_THROW(render_reference(m, degenerate, s), Error);
   SceneModel unfinalized = m;
   unfinalized.fine_to_block.clear();
   EXPECT_THROW(render_reference(unfinalized, cam, s), Error);
