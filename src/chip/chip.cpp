@@ -595,4 +595,24 @@ Image render_chip(const SceneModel& model, const Camera& camera, const ChipConfi
   return chip.run(counters);
 }
 
+Image render_chip_engine(const SceneModel& model, const Camera& camera, const RenderSettings& settings,
+                         RenderStats* stats) {
+  if (settings.form == ModelForm::Float)
+    fail("the chip renders the quantized model only (use --form quantized or auto)");
+  ChipConfig config;
+  config.step_micro = settings.step_micro;
+  config.transmittance_min = settings.transmittance_min;
+  for (int c = 0; c < 3; ++c) config.background[c] = settings.background[c];
+  ChipCounters counters;
+  Image image = render_chip(model, camera, config, &counters);
+  if (stats) {
+    stats->rays = counters.rays;
+    stats->rays_hit_aabb = counters.rays - counters.rays_dropped_abt - counters.rays_dropped_tsps;
+    stats->samples = counters.vru.samples;
+    stats->occupancy_checks =
+        counters.ctu.coarse_checks + counters.ftu.fine_checks + counters.ftu.leaf_checks + counters.ftu.micro_checks;
+  }
+  return image;
+}
+
 }  // namespace edrnr

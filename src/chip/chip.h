@@ -46,6 +46,7 @@
 #include "core/stats.h"
 #include "data/camera.h"
 #include "model/scene_model.h"
+#include "render/reference.h"
 
 namespace edrnr {
 
@@ -138,5 +139,13 @@ void export_chip_stats(const ChipCounters& c, StatsRegistry& stats, const std::s
 // config, camera or model.
 Image render_chip(const SceneModel& model, const Camera& camera, const ChipConfig& config,
                   ChipCounters* counters = nullptr);
+
+// The chip as a render engine with the reference renderer's signature: the
+// default ChipConfig with the settings' step, threshold and background (the
+// chip always reads the quantized model: a form of Float is an Error; threads
+// and use_occupancy_tiers do not apply). stats: rays, rays that reach the
+// traversal (hit the AABB), samples composited, bitmap checks of all tiers.
+Image render_chip_engine(const SceneModel& model, const Camera& camera, const RenderSettings& settings,
+                         RenderStats* stats = nullptr);
 
 }  // namespace edrnr

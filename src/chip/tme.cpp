@@ -42,6 +42,7 @@ std::vector<TmeLayer> compile_net(const std::vector<DenseQ>& net, const std::vec
     t.w = d.w;
     t.bias.resize(size_t(d.out));
     t.requant.resize(size_t(d.out));
+    t.abs_weight_sum.resize(size_t(d.out));
     for (int j = 0; j < d.out; ++j) {
       const double ws = d.w_scale[size_t(j)];
       if (!std::isfinite(ws) || ws < 0.0)
@@ -55,6 +56,8 @@ std::vector<TmeLayer> compile_net(const std::vector<DenseQ>& net, const std::vec
       const double scale =
           hidden ? acc_unit / double(net[l + 1].in_scale) : std::ldexp(acc_unit, n.mlp_output_frac_bits);
       t.requant[size_t(j)] = requant_or_fail(scale, n.requant_multiplier_bits, mlp, name);
+      for (int i = 0; i < d.in; ++i)
+        t.abs_weight_sum[size_t(j)] += std::abs(int64_t(t.w[size_t(j) * size_t(d.in) + size_t(i)]));
     }
     out.push_back(std::move(t));
   }
@@ -126,21 +129,31 @@ void Tme::load(uint32_t cv_tag) {
   counters_.mlp_load_bytes += mlps_[size_t(m)].stored_bytes;
 }
 
-void Tme::layer(const TmeLayer& L, const int64_t* x, int64_t* y, bool hidden, int out_bits) {
+void Tme::layer(const TmeLayer& L, const int32_t* x, int32_t* y, bool hidden, int out_bits) {
   const int A = n_.accumulator_bits;
+  const int64_t acc_max = fx::max_signed(A);
+  const int64_t x_max = int64_t(1) << (n_.activation_bits - 1);  // |x| <= 2^(activation_bits-1)
   for (int j = 0; j < L.out; ++j) {
     int64_t acc = fx::saturate(L.bias[size_t(j)], A);
     counters_.saturations += acc != L.bias[size_t(j)];
     const int8_t* w = &L.w[size_t(j) * size_t(L.in)];
-    for (int i = 0; i < L.in; ++i) {
-      const int64_t sum = acc + int64_t(w[i]) * x[i];
-      acc = fx::saturate(sum, A);
-      counters_.saturations += acc != sum;
+    if (std::abs(acc) + L.abs_weight_sum[size_t(j)] * x_max <= acc_max) {
+      // No partial sum can reach the accumulator's limits: saturating after
+      // each addition would change nothing.
+      int64_t sum = 0;
+      for (int i = 0; i < L.in; ++i) sum += int32_t(w[i]) * x[i];
+      acc += sum;
+    } else {
+      for (int i = 0; i < L.in; ++i) {
+        const int64_t sum = acc + int64_t(w[i]) * x[i];
+        acc = fx::saturate(sum, A);
+        counters_.saturations += acc != sum;
+      }
     }
     counters_.macs += uint64_t(L.in);
     const int64_t v = hidden ? std::max<int64_t>(acc, 0) : acc;
     const int64_t r = fx::requantize(v, L.requant[size_t(j)], n_.rounding);
-    y[j] = fx::saturate(r, out_bits);
+    y[j] = int32_t(fx::saturate(r, out_bits));
     counters_.saturations += y[j] != r;
   }
 }
@@ -149,17 +162,17 @@ TmeOutput Tme::eval(const int32_t* feature, const std::vector<int32_t>& dir_code
   if (current_ < 0) throw std::logic_error("TME eval: no MLP loaded");
   const TmeMlp& m = mlps_[size_t(current_)];
   const int act = n_.activation_bits, outb = n_.mlp_output_bits;
-  int64_t a[kMaxLayerWidth], b[kMaxLayerWidth];
+  int32_t a[kMaxLayerWidth], b[kMaxLayerWidth];
   auto in_stage = [&](int64_t v, const fx::Requant& q) {
     const int64_t r = fx::requantize(v, q, n_.rounding);
     const int64_t s = fx::saturate(r, act);
     counters_.saturations += s != r;
-    return s;
+    return int32_t(s);
   };
   const int F = model_.feature_channels;
   for (int c = 0; c < F; ++c) a[c] = in_stage(feature[c], m.feature_in[size_t(c)]);
-  int64_t* x = a;
-  int64_t* y = b;
+  int32_t* x = a;
+  int32_t* y = b;
   for (size_t l = 0; l < m.density.size(); ++l) {
     const bool hidden = l + 1 < m.density.size();
     layer(m.density[l], x, y, hidden, hidden ? act : outb);

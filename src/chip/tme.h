@@ -30,9 +30,10 @@ namespace edrnr::chip {
 
 struct TmeLayer {
   int in = 0, out = 0;
-  std::vector<int8_t> w;             // out * in, row-major
-  std::vector<int64_t> bias;         // out, INT32 in accumulator units
-  std::vector<fx::Requant> requant;  // out: to the next layer's input, or to the raw output format
+  std::vector<int8_t> w;                // out * in, row-major
+  std::vector<int64_t> bias;            // out, INT32 in accumulator units
+  std::vector<fx::Requant> requant;     // out: to the next layer's input, or to the raw output format
+  std::vector<int64_t> abs_weight_sum;  // out: sum of |w| of each row (bounds the accumulator)
 };
 
 struct TmeMlp {
@@ -88,7 +89,7 @@ class Tme {
   const TmeCounters& counters() const { return counters_; }
 
  private:
-  void layer(const TmeLayer& L, const int64_t* x, int64_t* y, bool hidden, int out_bits);
+  void layer(const TmeLayer& L, const int32_t* x, int32_t* y, bool hidden, int out_bits);
 
   const SceneModel& model_;
   ChipNumerics n_;
