@@ -6,10 +6,9 @@
 #include <optional>
 #include <stdexcept>
 
-#include "chip/abt.h"
 #include "chip/chip_ray.h"
+#include "chip/front_end.h"
 #include "chip/rp_buffer.h"
-#include "chip/tsps.h"
 #include "chip/zorg.h"
 #include "core/error.h"
 #include "core/file_io.h"
@@ -279,26 +278,6 @@ void check_model(const SceneModel& m) {
     if (coarse.get(i) && m.coarse_to_mlp[i] < 0) fail("model: occupied coarse voxel {} has no MLP", i);
 }
 
-// The traversal box in micro units: the object AABB widened to whole micro
-// voxels, or the whole scene box.
-void traversal_box(const SceneModel& m, bool use_aabb, Vec3d& lo, Vec3d& hi) {
-  const double R = m.micro_res;
-  for (int a = 0; a < 3; ++a) {
-    lo[a] = 0.0;
-    hi[a] = R;
-    if (!use_aabb) continue;
-    const double box_lo = m.scene_box.lo[a], size = m.scene_box.size()[a];
-    const double l = (double(m.object_aabb.lo[a]) - box_lo) / size * R;
-    const double h = (double(m.object_aabb.hi[a]) - box_lo) / size * R;
-    lo[a] = std::clamp(std::floor(l - 1e-3), 0.0, R);
-    hi[a] = std::clamp(std::ceil(h + 1e-3), 0.0, R);
-  }
-}
-
-Vec3i travel_sign(const Vec3d& dir) {
-  return {std::signbit(dir.x) ? -1 : 1, std::signbit(dir.y) ? -1 : 1, std::signbit(dir.z) ? -1 : 1};
-}
-
 // A feature block requested from DRAM, due at an issue number.
 struct PendingFill {
   uint32_t block;
@@ -314,7 +293,7 @@ class FunctionalChip {
         delta_(double(config.step_micro) * double(model.scene_box.size().x) / double(model.micro_res)),
         math_(n_.traversal_float, config.step_micro, model.micro_res),
         zorg_(camera.width, camera.height, config.switches.z_order ? ScanOrder::ZOrder : ScanOrder::RowOrder),
-        gen_(camera, model.scene_box, model.micro_res, n_.ray_float, n_.traversal_float),
+        front_(model, camera, n_, math_, config.switches.aabb),
         buffer_(config.rp_buffer_capacity),
         ctu_(model, math_, config.switches.lag_first),
         rob_(RpRobConfig{config.rp_rob.entries, config.rp_rob.entry_depth, config.rp_rob.recent_tags,
@@ -329,9 +308,6 @@ class FunctionalChip {
         image_(camera.width, camera.height, 3),
         batches_(size_t(config.ooo_queue_depth)),
         feature_(size_t(model.feature_channels)) {
-    traversal_box(model, config.switches.aabb, box_lo_, box_hi_);
-    abt_.emplace(box_lo_, box_hi_, n_.ray_float);
-    tsps_.emplace(math_, box_lo_, box_hi_);
     for (uint32_t i = 0; i < uint32_t(config.ooo_queue_depth); ++i) free_batches_.push_back(i);
     if (cfiu_.cache().lines() <= config.ooo_queue_depth)
       fail("chip config: the feature cache's {} lines must outnumber the {} OoO-SI entries that reserve them",
@@ -359,34 +335,7 @@ class FunctionalChip {
     bool progress = false;
     while (!zorg_.done() && !buffer_.full()) {
       progress = true;
-      const PixelQuad quad = zorg_.next();
-      const auto rays = gen_.generate(quad);
-      RayPacket p;
-      p.pixels = quad;
-      bool first = true;
-      for (int r = 0; r < kRaysPerPacket; ++r) {
-        RayState& s = p.rays[size_t(r)];
-        if (!(quad.valid_mask >> r & 1)) continue;
-        ++rays_;
-        s.valid = true;
-        s.ray = rays[size_t(r)].ray;
-        s.world_dir = rays[size_t(r)].world_dir;
-        vru_.start(s);
-        if (first) p.travel_sign = travel_sign(s.ray.dir);
-        first = false;
-        if (!abt_->hits(s.ray)) {
-          ++abt_dropped_;
-          continue;
-        }
-        const KInterval iv = tsps_->search(s.ray);
-        if (iv.empty()) {
-          ++tsps_dropped_;
-          continue;
-        }
-        s.k = iv.begin;
-        s.k_end = iv.end;
-        s.dir_code = Tme::encode_direction(s.world_dir, model_.mlp_arch.dir_frequencies, n_);
-      }
+      RayPacket p = front_.build(zorg_.next(), vru_);
       if (!p.live_mask()) {  // background only: no pointer needed
         ++packets_dropped_;
         write_pixels(p);
@@ -531,11 +480,11 @@ class FunctionalChip {
   void collect(ChipCounters& c) const {
     c = ChipCounters{};
     c.packets = zorg_.packet_count();
-    c.rays = rays_;
-    c.rays_dropped_abt = abt_dropped_;
-    c.rays_dropped_tsps = tsps_dropped_;
+    c.rays = front_.counters().rays;
+    c.rays_dropped_abt = front_.counters().rays_dropped_abt;
+    c.rays_dropped_tsps = front_.counters().rays_dropped_tsps;
     c.packets_dropped = packets_dropped_;
-    c.tsps_position_evals = tsps_->position_evals();
+    c.tsps_position_evals = front_.tsps_position_evals();
     c.zorg_skipped_quads = zorg_.skipped_quads();
     c.ctu = ctu_.counters();
     c.ftu = ftu_.counters();
@@ -561,10 +510,7 @@ class FunctionalChip {
   double delta_;
   RayMath math_;
   Zorg zorg_;
-  RayGenerator gen_;
-  Vec3d box_lo_, box_hi_;
-  std::optional<Abt> abt_;
-  std::optional<Tsps> tsps_;
+  FrontEnd front_;
   RpBuffer buffer_;
   Ctu ctu_;
   RpRob rob_;
@@ -581,7 +527,7 @@ class FunctionalChip {
   std::deque<std::pair<uint32_t, uint32_t>> insert_queue_;  // (RP, CV tag) waiting for the RP-ROB
   std::deque<PendingFill> pending_;
   uint64_t issue_clock_ = 0;
-  uint64_t rays_ = 0, abt_dropped_ = 0, tsps_dropped_ = 0, packets_dropped_ = 0;
+  uint64_t packets_dropped_ = 0;
   uint64_t cv_transitions_ = 0, fine_reschedules_ = 0, rps_finished_ = 0, fill_waits_ = 0;
 };
 

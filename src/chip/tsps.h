@@ -4,22 +4,22 @@
 // Refines where a ray of a packet starts and ends its march: the run of
 // candidates k whose point lies in the (closed) traversal box, found by a
 // binary search on k for each face of the box. Each coordinate of p_k is
-// monotone in k, so the search is exact: candidate begin is the first inside
-// the box, candidate end the first past it. An empty run means the ray has no
-// candidate in the box and is dropped like an ABT miss.
-#include <array>
+// monotone in k, so the search is exact: the run begins at the first
+// candidate inside the box and ends at the first past it. An empty run means
+// the ray has no candidate in the box and is dropped like an ABT miss.
+#include <cstdint>
 
 #include "chip/chip_ray.h"
-#include "chip/zorg.h"
 
 namespace edrnr::chip {
 
 class Tsps {
  public:
-  Tsps(const RayMath& math, const Vec3d& box_lo, const Vec3d& box_hi) : math_(math), lo_(box_lo), hi_(box_hi) {}
+  // math is kept by reference.
+  Tsps(const RayMath& math, const Vec3d& box_lo, const Vec3d& box_hi);
 
-  // The ray's run of candidates inside the box (see box_interval).
-  KInterval search(const ChipRay& ray) { return math_.box_interval(ray, lo_, hi_, &evals_); }
+  // The ray's run of candidates inside the box (RayMath::box_interval).
+  KInterval search(const ChipRay& ray);
 
   // Positions computed so far by the searches.
   uint64_t position_evals() const { return evals_; }
