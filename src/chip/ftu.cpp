@@ -21,23 +21,26 @@ bool leaf_occupied(uint64_t word, int leaf_x, int leaf_y, int leaf_z) {
 Ftu::Ftu(const SceneModel& model, const RayMath& math, bool lag_first, size_t micro_grid_cache_words)
     : model_(model), math_(math), lag_first_(lag_first), micro_grid_cache_(micro_grid_cache_words) {
   const Bitmap3& fine = model.occupancy[int(Tier::Fine)];
-  const Bitmap3& micro = model.occupancy[int(Tier::Micro)];
-  const int fr = fine.res();
-  micro_words_.assign(fine.size(), 0);
-  for (int z = 0; z < fr; ++z)
-    for (int y = 0; y < fr; ++y)
-      for (int x = 0; x < fr; ++x) {
-        const size_t f = fine.index(x, y, z);
-        if (!fine.get(f)) continue;
-        if (model.fine_to_block.size() != fine.size() || model.fine_to_block[f] < 0)
-          fail("model: occupied fine voxel ({}, {}, {}) has no feature block", x, y, z);
-        uint64_t w = 0;
-        for (int lz = 0; lz < kMicroPerFine; ++lz)
-          for (int ly = 0; ly < kMicroPerFine; ++ly)
-            for (int lx = 0; lx < kMicroPerFine; ++lx)
-              if (micro.get(4 * x + lx, 4 * y + ly, 4 * z + lz)) w |= uint64_t(1) << micro_bit(lx, ly, lz);
-        micro_words_[f] = w;
-      }
+  if (model.fine_to_block.size() != fine.size()) fail("model lookups are missing (call finalize())");
+  for (size_t f = 0; f < fine.size(); ++f)
+    if (fine.get(f) && model.fine_to_block[f] < 0) fail("model: occupied fine voxel {} has no feature block", f);
+}
+
+uint64_t Ftu::micro_word(uint32_t fine_index) const {
+  // Each row of 4 micro voxels along x is 4 aligned bits of the micro bitmap
+  // (4 * fine x is a multiple of 4, and so is the resolution).
+  const Bitmap3& micro = model_.occupancy[int(Tier::Micro)];
+  const int fr = model_.fine_res();
+  const int fx = int(fine_index % uint32_t(fr)), fy = int(fine_index / uint32_t(fr) % uint32_t(fr)),
+            fz = int(fine_index / uint32_t(fr * fr));
+  uint64_t w = 0;
+  for (int lz = 0; lz < kMicroPerFine; ++lz)
+    for (int ly = 0; ly < kMicroPerFine; ++ly) {
+      const size_t i = micro.index(kMicroPerFine * fx, kMicroPerFine * fy + ly, kMicroPerFine * fz + lz);
+      const uint64_t row = (micro.words()[i >> 6] >> (i & 63)) & 0xF;
+      w |= row << micro_bit(0, ly, lz);
+    }
+  return w;
 }
 
 bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& batch) {
@@ -71,7 +74,7 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
       continue;
     }
     // Occupied fine voxel: one micro-grid word serves the leaf and micro checks.
-    const uint64_t word = micro_words_[fine_index];
+    const uint64_t word = micro_word(fine_index);
     ++counters_.micro_word_reads;
     counters_.micro_word_hits += micro_grid_cache_.access(fine_index);
     batch.rp = rp_pointer;

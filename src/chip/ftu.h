@@ -66,14 +66,13 @@ class Ftu {
   bool run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& batch);
 
   // The 64 micro bits of a fine voxel, bit lx + 4 (ly + 4 lz).
-  uint64_t micro_word(uint32_t fine_index) const { return micro_words_[fine_index]; }
+  uint64_t micro_word(uint32_t fine_index) const;
   const FtuCounters& counters() const { return counters_; }
 
  private:
   const SceneModel& model_;
   const RayMath& math_;
   bool lag_first_;
-  std::vector<uint64_t> micro_words_;
   LruTags micro_grid_cache_;
   FtuCounters counters_;
 };

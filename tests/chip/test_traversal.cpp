@@ -109,6 +109,24 @@ TEST(Traversal, SamplesAreExactlyTheOccupiedCandidates) {
   EXPECT_GT(total, 1000u);
 }
 
+TEST(Traversal, MicroWordHoldsTheFineVoxelsMicroBits) {
+  const SceneModel m = blob_model();
+  const RayMath math(ChipNumerics{}.traversal_float, 1.0, m.micro_res);
+  const Ftu ftu(m, math, true);
+  const Bitmap3& micro = m.occupancy[int(Tier::Micro)];
+  const int fr = m.fine_res();
+  int words = 0;
+  for (int z = 0; z < fr; ++z)
+    for (int y = 0; y < fr; ++y)
+      for (int x = 0; x < fr; ++x) {
+        const uint64_t w = ftu.micro_word(linear_index(x, y, z, fr));
+        for (int b = 0; b < 64; ++b)
+          ASSERT_EQ((w >> b) & 1, uint64_t(micro.get(4 * x + b % 4, 4 * y + b / 4 % 4, 4 * z + b / 16)));
+        words += w != 0;
+      }
+  EXPECT_EQ(size_t(words), m.occupancy[int(Tier::Fine)].count());
+}
+
 TEST(Traversal, LagFirstKeepsRaysTogether) {
   // The same packets with and without lag-first: lag first advances at least
   // as many rays per coarse iteration on average.
