@@ -32,6 +32,7 @@ struct TrainCmdOptions {
   int64_t iters = 0, stop_after = -1;
   uint64_t seed = 0;
   int threads = 0, downscale = 0, eval_views = 0;
+  bool profile = false;
   CLI::Option *minutes_opt, *iters_opt, *seed_opt, *downscale_opt, *config_opt;
 };
 
@@ -148,6 +149,11 @@ void run_train(const TrainCmdOptions& o) {
   fmt::print("trained {} steps in {:.1f} min: {} blocks, {} MLPs; peak memory {:.2f} GiB\n", st.step, seconds / 60,
              st.blocks, st.mlps, peak_rss_gib());
   fmt::print("training PSNR (running): float {:.2f} dB, quantized {:.2f} dB\n", st.psnr_float, st.psnr_quantized);
+  if (o.profile) {
+    fmt::print("time per stage:");
+    for (const auto& [name, sec] : st.stage_seconds) fmt::print("  {} {:.1f} s", name, sec);
+    fmt::print("\n");
+  }
   fmt::print("wrote {}{}\n", o.output, o.float_output.empty() ? "" : " and " + o.float_output);
   if (o.eval_views > 0) {
     const double pf = eval_split(float_model, o.dataset, trainer->config(), o.eval_views, o.threads);
@@ -176,6 +182,7 @@ void register_train_cmd(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--stop-after", o->stop_after, "checkpoint and stop after this many steps (for resuming later)");
   cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();
+  cmd->add_flag("--profile", o->profile, "print the time spent in each stage of training");
   cmd->callback([o] { run_train(*o); });
 }
 

@@ -27,7 +27,6 @@ void LazyAdamArray::resize(size_t vertices, int channels, int slabs) {
   grad.assign(vertices * size_t(channels), 0.f);
   m.assign(vertices * size_t(channels), 0.f);
   v.assign(vertices * size_t(channels), 0.f);
-  touched.assign(vertices, 0);
   touched_list.assign(size_t(slabs), {});
 }
 
@@ -121,11 +120,10 @@ void FeaturePyramid::scatter_gradients(const GradientSlabs& slabs, const std::ve
             for (int c = 4 * dz; c < 4 * dz + 4; ++c) {
               const size_t vtx = L.vertex_index(cx + (c & 1), cy + ((c >> 1) & 1), vz);
               float* gv = &L.adam.grad[vtx * kLevelChannels];
+              const bool was_zero = gv[0] == 0.f && gv[1] == 0.f && gv[2] == 0.f && gv[3] == 0.f;
               for (int k = 0; k < kLevelChannels; ++k) gv[k] += w[c] * g[k];
-              if (!L.adam.touched[vtx]) {
-                L.adam.touched[vtx] = 1;
+              if (was_zero && (gv[0] != 0.f || gv[1] != 0.f || gv[2] != 0.f || gv[3] != 0.f))
                 list.push_back(int32_t(vtx));
-              }
             }
           }
         }
@@ -165,12 +163,8 @@ void FeaturePyramid::adam_step(const AdamStep& step) {
     for (int j = 0; j < n_lists; ++j) {
       auto& list = L.adam.touched_list[size_t(j)];
       for (int32_t vtx : list) {
-        for (int k = 0; k < kLevelChannels; ++k) {
-          const size_t i = size_t(vtx) * kLevelChannels + size_t(k);
-          step.update(L.value[i], L.adam.m[i], L.adam.v[i], L.adam.grad[i]);
-          L.adam.grad[i] = 0.f;
-        }
-        L.adam.touched[size_t(vtx)] = 0;
+        const size_t i = size_t(vtx) * kLevelChannels;
+        step.update4(&L.value[i], &L.adam.m[i], &L.adam.v[i], &L.adam.grad[i]);
       }
       list.clear();
     }
@@ -287,11 +281,13 @@ void BlockFeatures::scatter_gradients(const GradientSlabs& slabs, const std::vec
       for (int c = 0; c < 8; ++c) {
         const size_t vtx = size_t(b) * kBlockVerts + size_t(vid[c]);
         float* gv = &adam_.grad[vtx * size_t(F)];
-        for (int k = 0; k < F; ++k) gv[k] += w[c] * g[k];
-        if (!adam_.touched[vtx]) {
-          adam_.touched[vtx] = 1;
-          list.push_back(int32_t(vtx));
+        bool was_zero = true, now_zero = true;
+        for (int k = 0; k < F; ++k) {
+          was_zero = was_zero && gv[k] == 0.f;
+          gv[k] += w[c] * g[k];
+          now_zero = now_zero && gv[k] == 0.f;
         }
+        if (was_zero && !now_zero) list.push_back(int32_t(vtx));
       }
     }
   }
@@ -304,12 +300,16 @@ void BlockFeatures::adam_step(const AdamStep& step) {
   for (int j = 0; j < n_lists; ++j) {
     auto& list = adam_.touched_list[size_t(j)];
     for (int32_t vtx : list) {
-      for (size_t k = 0; k < F; ++k) {
+      size_t k = 0;
+      for (; k + 4 <= F; k += 4) {
+        const size_t i = size_t(vtx) * F + k;
+        step.update4(&value_[i], &adam_.m[i], &adam_.v[i], &adam_.grad[i]);
+      }
+      for (; k < F; ++k) {
         const size_t i = size_t(vtx) * F + k;
         step.update(value_[i], adam_.m[i], adam_.v[i], adam_.grad[i]);
         adam_.grad[i] = 0.f;
       }
-      adam_.touched[size_t(vtx)] = 0;
     }
     list.clear();
   }

@@ -37,10 +37,12 @@ struct GradientSlabs {
   void build(int micro_res, int slab_micro_, const std::vector<int32_t>& ids, const std::vector<int16_t>& micro);
 };
 
-// Per-vertex optimizer state for a grid of vertices x channels.
+// Per-vertex optimizer state for a grid of vertices x channels. A vertex is
+// "touched" by a step when its gradient turns non-zero; it is then listed
+// (in the list of the slab task that owns it) for the Adam step, which zeroes
+// the gradient again.
 struct LazyAdamArray {
   std::vector<float> grad, m, v;
-  std::vector<uint8_t> touched;                    // per vertex
   std::vector<std::vector<int32_t>> touched_list;  // per slab task
   void resize(size_t vertices, int channels, int slabs);
 };

@@ -219,12 +219,15 @@ EDRNR_CLONES void layer_input_grad(const float* W, int in, int out, const float*
 
 }  // namespace
 
-void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, float* acts) {
+void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, float* acts,
+                 int last_rows) {
   const float* x = x0;
   float* y = acts;
   for (size_t k = 0; k < layers.size(); ++k) {
     const auto& l = layers[k];
-    layer_forward(params + l.w, params + l.b, l.in, l.out, x, y, k + 1 < layers.size());
+    const bool last = k + 1 == layers.size();
+    const int rows = last && last_rows >= 0 ? std::min(last_rows, l.out) : l.out;
+    layer_forward(params + l.w, params + l.b, l.in, rows, x, y, !last);
     x = y;
     y += size_t(l.out) * kLanes;
   }

@@ -65,7 +65,10 @@ MlpQ quantize_mlp(const MlpLayout& layout, const float* params, const std::vecto
 // Forward pass of one net (`layers` = layout.density or layout.color) over a
 // chunk. x0: [layers[0].in][kLanes]. acts: every layer's output in turn
 // ([out][kLanes] each; hidden layers after ReLU, the last layer linear).
-void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, float* acts);
+// last_rows >= 0 computes only the first last_rows outputs of the last layer
+// (the rest of its block is left untouched), e.g. 1 for the raw density alone.
+void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, float* acts,
+                 int last_rows = -1);
 
 // Backward pass of one net over a chunk. d_last: [last out][kLanes], the loss
 // gradient with respect to the last layer's (linear) output. Adds parameter

@@ -129,6 +129,14 @@ struct Batch {
   }
 };
 
+enum Stage { kRays, kMarch, kDensity, kColor, kComposite, kBackward, kScatter, kAdam, kOccupancy, kPhase, kStages };
+const char* const kStageNames[kStages] = {"rays",     "march",    "density", "colour",    "composite",
+                                          "backward", "scatter",  "adam",    "occupancy", "phase change"};
+
+double seconds_since(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
 uint64_t dataset_fingerprint(const Dataset& d) {
   uint64_t h = mix64(d.frames.size());
   for (const auto& f : d.frames) {
@@ -187,6 +195,7 @@ struct Trainer::State {
   std::vector<float> float_blocks, float_mlps;
 
   mutable Batch batch;
+  mutable double stage_s[kStages] = {};
 
   State(const Dataset& d, const TrainConfig& c) : data(d), cfg(c), arch(c.mlp_arch()), layout(arch), occ(c.micro_res) {
     cfg.validate();
@@ -297,6 +306,20 @@ struct Trainer::State {
   // Position of candidate k of ray i in micro-grid units (exactly as the renderer computes it).
   Vec3f candidate(const Batch& b, int i, int32_t k) const { return b.mray[size_t(i)].point(k); }
 
+  // How many of the candidates after the one at p (in micro voxel m) surely
+  // lie in the same macro cell: one fewer than the whole steps to the cell's
+  // exit, a margin far above the rounding of the candidates' points.
+  int32_t candidates_left_in_macro(const MicroRay& r, const Vec3f& p, const Vec3i& m) const {
+    float t_exit = INFINITY;
+    for (int a = 0; a < 3; ++a) {
+      const float lo = float((m[a] / kMacroCell) * kMacroCell), hi = lo + float(kMacroCell);
+      if (r.dir[a] > 0.f) t_exit = std::min(t_exit, (hi - p[a]) / r.dir[a]);
+      if (r.dir[a] < 0.f) t_exit = std::min(t_exit, (lo - p[a]) / r.dir[a]);
+    }
+    const float steps = std::floor(t_exit / delta);
+    return steps > 1.f ? int32_t(std::min(steps, 1e6f)) - 1 : 0;
+  }
+
   int32_t mlp_of_micro(int x, int y, int z) const {
     if (phase == Phase::Main) return 0;
     const int cr = cfg.micro_res / 32;
@@ -345,7 +368,11 @@ struct Trainer::State {
           const Vec3f p = candidate(b, i, k);
           Vec3i m;
           if (!micro_voxel_of(p, cfg.micro_res, m)) continue;
-          if (!occ.macro_occupied(m.x, m.y, m.z) || !occ.occupied(m.x, m.y, m.z)) continue;
+          if (!occ.macro_occupied(m.x, m.y, m.z)) {
+            k += candidates_left_in_macro(b.mray[size_t(i)], p, m);
+            continue;
+          }
+          if (!occ.occupied(m.x, m.y, m.z)) continue;
           const size_t o = (li * size_t(K) + size_t(c)) * 3;
           for (int a = 0; a < 3; ++a) {
             cand_pos[o + size_t(a)] = p[a];
@@ -380,7 +407,9 @@ struct Trainer::State {
         }
       }
       b.n_samples = s0 + total;
+      const auto td = std::chrono::steady_clock::now();
       evaluate_density(b, s0, b.n_samples);
+      stage_s[kDensity] += seconds_since(td);
       // Transmittance along each ray; termination.
       std::vector<int32_t> used(L, 0);
 #pragma omp parallel for schedule(static)
@@ -644,13 +673,34 @@ struct Trainer::State {
     return occ_updates >= kSweepParts ? std::min(t, float(mean)) : t;
   }
 
-  // Evaluates the density of every micro voxel of sweep part `part` at a
-  // jittered point and folds it into the running maximum.
+  // The micro voxels a refresh evaluates: the whole grid until the AABB is
+  // known, then the AABB widened by kOccupancyMargin voxels (so that it can grow).
+  static constexpr int kOccupancyMargin = 8;
+  void refresh_bounds(Vec3i& lo, Vec3i& hi) const {
+    const int R = cfg.micro_res;
+    lo = {0, 0, 0};
+    hi = {R - 1, R - 1, R - 1};
+    if (!occ.aabb_known) return;
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::max(0, occ.aabb_lo[a] - kOccupancyMargin);
+      hi[a] = std::min(R - 1, occ.aabb_hi[a] + kOccupancyMargin);
+    }
+  }
+
+  // Evaluates the density of every micro voxel of sweep part `part` inside the
+  // refresh bounds at a jittered point and folds it into the running maximum.
   void refresh_occupancy_part(int part, float decay) {
     const int R = cfg.micro_res;
     const uint64_t base = hash3(cfg.seed, uint64_t(RngStream::Occupancy), uint64_t(occ_updates));
-    const int py = (part >> 1) & 1, pz = (part >> 2) & 1, px = part & 1;
-    const int rows = (R / 2) * (R / 2);
+    Vec3i lo, hi;
+    refresh_bounds(lo, hi);
+    const int px = part & 1, py = (part >> 1) & 1, pz = (part >> 2) & 1;
+    // First coordinate >= lo with the part's parity, and the count along each axis.
+    auto first = [](int l, int p) { return l + ((l & 1) != p ? 1 : 0); };
+    const int x_first = first(lo.x, px), y_first = first(lo.y, py), z_first = first(lo.z, pz);
+    const int ny = y_first <= hi.y ? (hi.y - y_first) / 2 + 1 : 0;
+    const int nz = z_first <= hi.z ? (hi.z - z_first) / 2 + 1 : 0;
+    const int rows = ny * nz;
 #pragma omp parallel
     {
       std::vector<float> x0(size_t(F) * kLanes), acts(size_t(layout.density_act_floats) * kLanes),
@@ -658,21 +708,21 @@ struct Trainer::State {
       const float* params = mlp_params.data();
 #pragma omp for schedule(dynamic, 16)
       for (int row = 0; row < rows; ++row) {
-        const int y = 2 * (row % (R / 2)) + py, z = 2 * (row / (R / 2)) + pz;
-        for (int x0i = px; x0i < R; x0i += 2 * kLanes) {
+        const int y = y_first + 2 * (row % ny), z = z_first + 2 * (row / ny);
+        for (int xs = x_first; xs <= hi.x; xs += 2 * kLanes) {
           std::fill(x0.begin(), x0.end(), 0.f);
           int nl = 0;
-          for (int x = x0i; x < R && nl < kLanes; x += 2, ++nl) {
+          for (int x = xs; x <= hi.x && nl < kLanes; x += 2, ++nl) {
             const size_t cell = size_t(linear_index(x, y, z, R));
             const uint64_t h = hash_combine(base, cell);
             const Vec3f p{float(x) + uniform01(h), float(y) + uniform01(mix64(h)), float(z) + uniform01(mix64(h + 1))};
             pyramid.interpolate(p, {x, y, z}, f.data());
             for (int c = 0; c < F; ++c) x0[size_t(c) * kLanes + size_t(nl)] = f[size_t(c)];
           }
-          net_forward(layout.density, params, x0.data(), acts.data());
+          net_forward(layout.density, params, x0.data(), acts.data(), 1);
           const float* raw = acts.data() + size_t(layout.density_act_floats - G) * kLanes;
           int l = 0;
-          for (int x = x0i; x < R && l < nl; x += 2, ++l) {
+          for (int x = xs; x <= hi.x && l < nl; x += 2, ++l) {
             const size_t cell = size_t(linear_index(x, y, z, R));
             const float sigma = sigma_of_raw(raw[size_t(l)]);
             float& d = occ.density[cell];
@@ -692,6 +742,16 @@ struct Trainer::State {
 
   void update_aabb() {
     occ.update_aabb(occupancy_threshold(), cfg.aabb_filter_sigma, cfg.aabb_keep);
+    // Voxels beyond the refresh bounds are no longer evaluated: they count as empty.
+    Vec3i lo, hi;
+    refresh_bounds(lo, hi);
+    const int R = cfg.micro_res;
+#pragma omp parallel for schedule(static)
+    for (int z = 0; z < R; ++z)
+      for (int y = 0; y < R; ++y)
+        for (int x = 0; x < R; ++x)
+          if (x < lo.x || y < lo.y || z < lo.z || x > hi.x || y > hi.y || z > hi.z)
+            occ.density[size_t(linear_index(x, y, z, R))] = 0.f;
     occ.rebuild(occupancy_threshold());
   }
 
@@ -772,12 +832,21 @@ struct Trainer::State {
 
   void do_step() {
     if (phase == Phase::Done) return;
+    using clock = std::chrono::steady_clock;
+    auto t = clock::now();
+    auto lap = [&](Stage st) {
+      const auto now = clock::now();
+      stage_s[st] += std::chrono::duration<double>(now - t).count();
+      t = now;
+    };
     if (phase == Phase::Main && step >= freeze_step()) freeze();
     if (phase == Phase::PerCv && step >= qat_step()) start_quantization();
+    lap(kPhase);
     if (phase == Phase::Main) {
       if (step % cfg.occupancy_every == 0) refresh_occupancy();
       if (step >= cfg.aabb_start && (step - cfg.aabb_start) % cfg.aabb_every == 0) update_aabb();
     }
+    lap(kOccupancy);
     if (phase == Phase::Quantize) {
       if ((step - qat_step()) % cfg.quant_refit_every == 0 && step != qat_step()) {
         feature_quant = blocks.fit_quantization();
@@ -788,14 +857,22 @@ struct Trainer::State {
         fake_quantize_mlp(layout, &mlp_params[size_t(m) * layout.param_count],
                           &mlp_eff[size_t(m) * layout.param_count]);
     }
+    lap(kPhase);
 
     Batch& b = batch;
     sample_training_rays(b, n_rays);
+    lap(kRays);
+    const double density_before = stage_s[kDensity];
     march(b);
+    lap(kMarch);
+    stage_s[kMarch] -= stage_s[kDensity] - density_before;
     evaluate_color(b);
+    lap(kColor);
     const double se = composite_rays(b, true);
+    lap(kComposite);
     std::vector<float> grad;
     backward_mlps(b, grad, phase == Phase::Quantize);
+    lap(kBackward);
 
     // Feature gradients, slab by slab.
     std::vector<int32_t> active_ids;
@@ -808,11 +885,13 @@ struct Trainer::State {
       slabs.build(cfg.micro_res, pyramid.slab_micro(), active_ids, b.micro);
       pyramid.scatter_gradients(slabs, b.pos, b.micro, b.d_feat);
       pyramid.add_tv_gradient(cfg.tv_weight);
+      lap(kScatter);
       ++feature_adam_t;
       pyramid.adam_step(AdamStep(adam_settings(), cfg.lr_features * lr, feature_adam_t));
     } else {
       slabs.build(cfg.micro_res, kMicroPerFine, active_ids, b.micro);
       blocks.scatter_gradients(slabs, b.pos, b.micro, b.d_feat);
+      lap(kScatter);
       ++feature_adam_t;
       blocks.adam_step(AdamStep(adam_settings(), cfg.lr_features * lr, feature_adam_t));
     }
@@ -822,6 +901,7 @@ struct Trainer::State {
 #pragma omp parallel for schedule(static)
     for (int64_t k = 0; k < np; ++k)
       mstep.update(mlp_params[size_t(k)], mlp_m[size_t(k)], mlp_v[size_t(k)], grad[size_t(k)]);
+    lap(kAdam);
 
     // Running error and the next batch size.
     const double mse = se / (3.0 * b.n_rays);
@@ -1082,6 +1162,7 @@ TrainStats Trainer::stats() const {
   t.psnr_quantized = s_->psnr_quantized;
   t.blocks = s_->phase == Phase::Main ? 0 : s_->blocks.block_count();
   t.mlps = s_->phase == Phase::Main ? 0 : s_->mlp_cv.size();
+  for (int i = 0; i < kStages; ++i) t.stage_seconds.emplace_back(kStageNames[i], s_->stage_s[i]);
   return t;
 }
 

@@ -58,6 +58,8 @@ struct TrainStats {
   double psnr_float = 0;        // running PSNR at the end of the float phases (0 until then)
   double psnr_quantized = 0;    // running PSNR at the end of training (0 until then)
   size_t blocks = 0, mlps = 0;  // after the freeze
+  // Wall-clock seconds spent in each stage of the steps so far in this process.
+  std::vector<std::pair<std::string, double>> stage_seconds;
 };
 
 class Trainer {

@@ -319,10 +319,23 @@ TEST(FeatureGrid, PyramidGradientMatchesFiniteDifferences) {
       const double fd = (lp - lm) / 1.0;
       EXPECT_NEAR(L.adam.grad[v], fd, 1e-3 * (1 + std::fabs(fd))) << "level " << li << " value " << v;
       if (L.adam.grad[v] != 0.f) ++touched;
-      EXPECT_EQ(L.adam.touched[v / kLevelChannels] != 0, L.adam.grad[v] != 0.f);
     }
   }
   EXPECT_GT(touched, 50);
+  // The touched lists name exactly the vertices with a non-zero gradient.
+  for (const auto& L : pyr.levels()) {
+    std::vector<uint8_t> listed(L.value.size() / kLevelChannels, 0);
+    for (const auto& list : L.adam.touched_list)
+      for (int32_t v : list) {
+        EXPECT_EQ(listed[size_t(v)], 0) << "listed twice";
+        listed[size_t(v)] = 1;
+      }
+    for (size_t v = 0; v < listed.size(); ++v) {
+      const bool nonzero = L.adam.grad[4 * v] != 0.f || L.adam.grad[4 * v + 1] != 0.f ||
+                           L.adam.grad[4 * v + 2] != 0.f || L.adam.grad[4 * v + 3] != 0.f;
+      EXPECT_EQ(listed[v] != 0, nonzero) << "vertex " << v;
+    }
+  }
 }
 
 TEST(FeatureGrid, PyramidGradientDoesNotDependOnSlabSplit) {
