@@ -11,7 +11,7 @@ MODEL=assets/default.edrnr
 if [ ! -f "$MODEL" ]; then
   echo "demo: no bundled model yet; building the procedural 'several objects' scene"
   MODEL="$OUT/scene.edrnr"
-  ./build/edrnr make-scene several -o "$MODEL"
+  ./build/edrnr make-scene several --quantized-only -o "$MODEL"
 fi
 ./build/edrnr inspect "$MODEL"
 ./build/edrnr render "$MODEL" --orbit 30 --width 400 --height 400 -o "$OUT/view.png"

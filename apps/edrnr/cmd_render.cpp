@@ -15,6 +15,7 @@
 #include "render/cameras.h"
 #include "render/options.h"
 #include "render/reference.h"
+#include "chip/chip.h"
 
 namespace edrnr::cli {
 namespace {
@@ -27,6 +28,7 @@ struct Engine {
 };
 const Engine kEngines[] = {
     {"reference", "float volume rendering, the golden model", render_reference},
+    {"chip", "bit-accurate EDR-NR chip model (configs/chip/default.yaml settings)", render_chip_engine},
 };
 
 const Engine& find_engine(const std::string& name) {
@@ -144,7 +146,7 @@ void register_render_cmd(CLI::App& app) {
   cmd->add_option("--form", o->form, "auto, float or quantized")->capture_default_str();
   cmd->add_option("--background", o->background, "white, black or R,G,B")->capture_default_str();
   cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();
-  cmd->add_option("--engine", o->engine, "renderer: reference")->capture_default_str();
+  cmd->add_option("--engine", o->engine, "renderer: reference (float golden) or chip (bit-accurate chip model)")->capture_default_str();
   cmd->callback([o] { run_render(*o); });
 }
 

@@ -85,7 +85,7 @@ TmeMlp compile_tme_mlp(const SceneModel& model, size_t index, const ChipNumerics
                              "density-to-colour input");
   m.dir_in = requant_or_fail(std::ldexp(1.0 / c_in, -n.direction_code_frac_bits), n.requant_multiplier_bits, index,
                              "direction input");
-  m.stored_bytes = arch.q8_bytes() + 4 * m.feature_in.size() + 8;
+  m.stored_bytes = arch.q8_bytes();
   return m;
 }
 

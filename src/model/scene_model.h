@@ -79,9 +79,11 @@ struct MlpArch {
   size_t weight_count() const;  // weights only, both nets
   size_t bias_count() const;
   // Bytes of one INT8 MLP as the chip stores it in DRAM and in its MLP cache:
-  // 1 byte per weight, and per output neuron an INT32 bias and an INT32
-  // fixed-point requantization multiplier.
-  size_t q8_bytes() const { return weight_count() + 8 * bias_count(); }
+  // 1 byte per weight; per output neuron an INT32 bias and an INT32
+  // fixed-point requantization multiplier; and the input stage's INT32
+  // multipliers, one per feature channel plus one for the density-net outputs
+  // and one for the direction code.
+  size_t q8_bytes() const { return weight_count() + 8 * bias_count() + 4 * size_t(feature_channels() + 2); }
   bool operator==(const MlpArch& o) const = default;
 };
 

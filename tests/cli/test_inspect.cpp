@@ -95,7 +95,7 @@ TEST_F(InspectCli, TextReportOfAValidModel) {
   EXPECT_NE(r.out.find("PASS  no occupied micro voxel lies outside the object AABB"), std::string::npos);
   EXPECT_EQ(r.out.find("FAIL"), std::string::npos);
   // INT8 MLP: 2x8 + 8x4 + 7x8 + 8x3 = 128 weights, 23 outputs x 8 bytes.
-  EXPECT_NE(r.out.find("312 bytes per MLP; fits the 8448-byte MLP cache"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("328 bytes per MLP; fits the 8448-byte MLP cache"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("density 2-8-4, colour 7-8-3"), std::string::npos);
   EXPECT_NE(r.out.find("scene: \"hand\""), std::string::npos);
 }
@@ -120,17 +120,17 @@ TEST_F(InspectCli, JsonReport) {
   EXPECT_EQ(j["features"]["float"], true);
   EXPECT_EQ(j["features"]["float_bytes"], 2 * 125 * 2 * 4);
   EXPECT_EQ(j["mlps"]["count"], 1);
-  EXPECT_EQ(j["mlps"]["q8_bytes_per_mlp"], 312);
+  EXPECT_EQ(j["mlps"]["q8_bytes_per_mlp"], 328);
   EXPECT_EQ(j["mlps"]["fits_mlp_cache"], true);
   EXPECT_EQ(j["metadata"]["views"], 3);
-  // Coarse 1 bit -> 1 B, fine 8^3 bits -> 64 B, 2 fine voxels x 8 B, 2 blocks x 125 B (125 x 2 nibbles), 1 MLP x 312 B.
+  // Coarse 1 bit -> 1 B, fine 8^3 bits -> 64 B, 2 fine voxels x 8 B, 2 blocks x 125 B (125 x 2 nibbles), 1 MLP x 328 B (312 + 4 x (2 + 2) input multipliers).
   const auto& fp = j["dram_footprint_bytes"];
   EXPECT_EQ(fp["coarse_bitmap"], 1);
   EXPECT_EQ(fp["fine_bitmap"], 64);
   EXPECT_EQ(fp["micro_grid_bitmap"], 16);
   EXPECT_EQ(fp["features"], 250);
-  EXPECT_EQ(fp["mlp_weights"], 312);
-  EXPECT_EQ(fp["total"], 643);
+  EXPECT_EQ(fp["mlp_weights"], 328);
+  EXPECT_EQ(fp["total"], 659);
   EXPECT_EQ(j["checks"].size(), 8u);
   EXPECT_EQ(j["ok"], true);
 }

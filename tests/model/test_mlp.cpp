@@ -25,7 +25,7 @@ TEST(Mlp, DefaultArchFitsTheMlpCache) {
   EXPECT_EQ(a.color_widths, (std::vector<int>{31, 32, 32, 3}));  // 16 + 3 + 6*2
   EXPECT_EQ(a.dir_frequencies, 2);
   // Weights 16*32 + 32*16 + 31*32 + 32*32 + 32*3 = 3136; biases 32+16+32+32+3 = 115.
-  EXPECT_EQ(a.q8_bytes(), 3136u + 8u * 115u);
+  EXPECT_EQ(a.q8_bytes(), 3136u + 8u * 115u + 4u * 18u);
   EXPECT_LE(a.q8_bytes(), kMlpCacheBytes);
 }
 

@@ -319,9 +319,10 @@ TEST(ModelIo, DramFootprintByDataType) {
   size_t fine_occupied = m.occupancy[int(Tier::Fine)].count();
   EXPECT_EQ(f.micro_grid_bytes, 8 * fine_occupied);
   EXPECT_EQ(f.feature_bytes, m.block_count() * 250);  // 125 vertices x 4 nibbles
-  // density 4->8->4, colour 13->6->3: 32 + 32 + 78 + 18 = 160 weights, 8+4+6+3 = 21 outputs.
-  EXPECT_EQ(f.mlp_weight_bytes, m.mlp_count() * (160 + 8 * 21));
-  EXPECT_EQ(f.total_bytes(), 1 + 512 + 8 * fine_occupied + m.block_count() * 250 + m.mlp_count() * 328);
+  // density 4->8->4, colour 13->6->3: 32 + 32 + 78 + 18 = 160 weights, 8+4+6+3 = 21 outputs,
+  // 4 + 2 input-stage multipliers.
+  EXPECT_EQ(f.mlp_weight_bytes, m.mlp_count() * (160 + 8 * 21 + 4 * 6));
+  EXPECT_EQ(f.total_bytes(), 1 + 512 + 8 * fine_occupied + m.block_count() * 250 + m.mlp_count() * 352);
   EXPECT_EQ(feature_block_q4_bytes(16), 1000u);
   EXPECT_EQ(feature_block_q4_bytes(3), 188u);  // 375 nibbles
 }
