@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "cli_fixture.h"
 #include "core/file_io.h"
 #include "model/model_io.h"
 
@@ -17,41 +18,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct RunResult {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-class InspectCli : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("edrnr_test_inspect_" + std::to_string(::getpid()));
-    fs::create_directories(dir_);
-    ASSERT_TRUE(fs::exists(binary())) << binary() << " is not built";
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-
-  static fs::path binary() { return fs::path(EDRNR_BINARY_DIR) / "edrnr"; }
-
-  RunResult run(const std::string& args) {
-    fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-    std::string cmd = binary().string() + " " + args + " >" + out.string() + " 2>" + err.string();
-    int status = std::system(cmd.c_str());
-    RunResult r;
-    r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = read_file_text(out);
-    r.err = read_file_text(err);
-    return r;
-  }
-
-  fs::path save(const SceneModel& m, const std::string& name) {
-    fs::path p = dir_ / name;
-    save_model(p, m);
-    return p;
-  }
-
-  fs::path dir_;
-};
+using InspectCli = CliTest;
 
 // Scene box [0, 32]^3 at micro_res 32 (micro voxel = 1 unit). Micro voxels (5,5,5),
 // (20,9,9), (21,9,9): 3 micro, 2 leaf, 2 fine (so 2 blocks), 1 coarse voxel (1 MLP).
@@ -123,7 +90,8 @@ TEST_F(InspectCli, JsonReport) {
   EXPECT_EQ(j["mlps"]["q8_bytes_per_mlp"], 328);
   EXPECT_EQ(j["mlps"]["fits_mlp_cache"], true);
   EXPECT_EQ(j["metadata"]["views"], 3);
-  // Coarse 1 bit -> 1 B, fine 8^3 bits -> 64 B, 2 fine voxels x 8 B, 2 blocks x 125 B (125 x 2 nibbles), 1 MLP x 328 B (312 + 4 x (2 + 2) input multipliers).
+  // Coarse 1 bit -> 1 B, fine 8^3 bits -> 64 B, 2 fine voxels x 8 B, 2 blocks x 125 B (125 x 2 nibbles), 1 MLP x 328 B
+  // (312 + 4 x (2 + 2) input multipliers).
   const auto& fp = j["dram_footprint_bytes"];
   EXPECT_EQ(fp["coarse_bitmap"], 1);
   EXPECT_EQ(fp["fine_bitmap"], 64);
