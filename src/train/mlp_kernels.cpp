@@ -17,15 +17,21 @@ constexpr int kVecs = kLanes / 8;
 
 #define EDRNR_CLONES __attribute__((target_clones("avx2", "default")))
 
-inline v8f splat(float x) { return v8f{x, x, x, x, x, x, x, x}; }
-inline v8f load8(const float* p) {
+__attribute__((always_inline)) inline v8f splat(float x) { return v8f{x, x, x, x, x, x, x, x}; }
+__attribute__((always_inline)) inline v8f load8(const float* p) {
   v8f v;
   __builtin_memcpy(&v, p, sizeof v);
   return v;
 }
-inline void store8(float* p, v8f v) { __builtin_memcpy(p, &v, sizeof v); }
-// Fixed pairwise order, the same on every instruction set.
-inline float hsum8(v8f v) { return ((v[0] + v[1]) + (v[2] + v[3])) + ((v[4] + v[5]) + (v[6] + v[7])); }
+__attribute__((always_inline)) inline void store8(float* p, v8f v) { __builtin_memcpy(p, &v, sizeof v); }
+typedef float v4f __attribute__((vector_size(16)));
+// Fixed pairwise order, the same on every instruction set:
+// ((v0 + v4) + (v2 + v6)) + ((v1 + v5) + (v3 + v7)).
+__attribute__((always_inline)) inline float hsum8(v8f v) {
+  const v4f a = __builtin_shufflevector(v, v, 0, 1, 2, 3) + __builtin_shufflevector(v, v, 4, 5, 6, 7);
+  const v4f b = a + __builtin_shufflevector(a, a, 2, 3, 2, 3);
+  return b[0] + b[1];
+}
 
 }  // namespace
 
@@ -180,7 +186,8 @@ EDRNR_CLONES void layer_forward(const float* W, const float* b, int in, int out,
   }
 }
 
-// Parameter gradients of one layer: gW[o][i] += sum_lanes dy[o] x[i], gb[o] += sum_lanes dy[o].
+// Parameter gradients of one layer: gW[o][i] += sum_lanes dy[o] x[i],
+// gb[o] += sum_lanes dy[o] (lanes summed by hsum8's fixed tree).
 EDRNR_CLONES void layer_param_grad(const float* x, const float* dy, int in, int out, float* gW, float* gb) {
   for (int o = 0; o < out; ++o) {
     const float* d = dy + size_t(o) * kLanes;
@@ -259,6 +266,8 @@ void net_backward(const std::vector<MlpLayout::Layer>& layers, const float* para
     }
   }
 }
+
+size_t net_backward_scratch_floats(const MlpLayout& layout) { return 2 * size_t(layout.max_width) * kLanes; }
 
 float block_max_abs(const float* block, int rows, int n) {
   float m = 0.f;

@@ -74,9 +74,11 @@ void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* param
 // gradient with respect to the last layer's (linear) output. Adds parameter
 // gradients into grad (same layout as params). If d_x0 is not null it
 // receives [layers[0].in][kLanes], the gradient with respect to x0. scratch
-// holds 2 * max_width * kLanes floats.
+// holds net_backward_scratch_floats(layout) floats.
 void net_backward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, const float* acts,
                   const float* d_last, float* grad, float* d_x0, float* scratch);
+
+size_t net_backward_scratch_floats(const MlpLayout& layout);
 
 // Largest |value| of rows x kLanes values, over the first n lanes.
 float block_max_abs(const float* block, int rows, int n);

@@ -130,8 +130,8 @@ struct Batch {
 };
 
 enum Stage { kRays, kMarch, kDensity, kColor, kComposite, kBackward, kScatter, kAdam, kOccupancy, kPhase, kStages };
-const char* const kStageNames[kStages] = {"rays",     "march",    "density", "colour",    "composite",
-                                          "backward", "scatter",  "adam",    "occupancy", "phase change"};
+const char* const kStageNames[kStages] = {"rays",     "march",   "density", "colour",    "composite",
+                                          "backward", "scatter", "adam",    "occupancy", "phase change"};
 
 double seconds_since(std::chrono::steady_clock::time_point t) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
@@ -588,7 +588,7 @@ struct Trainer::State {
       std::vector<float> xc(size_t(cin) * kLanes), dz(3 * size_t(kLanes)), dxc(size_t(cin) * kLanes);
       std::vector<float> xd(size_t(F) * kLanes), actd(size_t(layout.density_act_floats) * kLanes);
       std::vector<float> dgeo(size_t(G) * kLanes), dfeat(size_t(F) * kLanes);
-      std::vector<float> scratch(2 * size_t(layout.max_width) * kLanes);
+      std::vector<float> scratch(net_backward_scratch_floats(layout));
 #pragma omp for schedule(dynamic, 1)
       for (int it = 0; it < n_items; ++it) {
         const WorkItem& w = b.col_items[size_t(it)];

@@ -67,7 +67,7 @@ void check_net(const MlpLayout& layout, const std::vector<MlpLayout::Layer>& lay
     for (int l = 0; l < c.n; ++l) c.r[size_t(o) * kLanes + l] = rnd(seed, 9000 + o * 64 + l, -1.f, 1.f);
 
   std::vector<float> acts(c.act_floats()), grad(layout.param_count, 0.f), dx(size_t(layers[0].in) * kLanes);
-  std::vector<float> scratch(2 * size_t(layout.max_width) * kLanes);
+  std::vector<float> scratch(net_backward_scratch_floats(layout));
   net_forward(layers, c.params.data(), c.x0.data(), acts.data());
   net_backward(layers, c.params.data(), c.x0.data(), acts.data(), c.r.data(), grad.data(), dx.data(), scratch.data());
 
@@ -127,7 +127,7 @@ TEST(MlpKernels, PaddingLanesAddNothingToParameterGradients) {
   std::vector<float> x0(size_t(layers[0].in) * kLanes, 0.5f), d(size_t(layers.back().out) * kLanes, 0.f);
   for (int o = 0; o < layers.back().out; ++o) d[size_t(o) * kLanes + 0] = 1.f;  // only lane 0
   std::vector<float> acts(size_t(layout.density_act_floats) * kLanes), g1(layout.param_count, 0.f),
-      g2(layout.param_count, 0.f), scratch(2 * size_t(layout.max_width) * kLanes);
+      g2(layout.param_count, 0.f), scratch(net_backward_scratch_floats(layout));
   net_forward(layers, params.data(), x0.data(), acts.data());
   net_backward(layers, params.data(), x0.data(), acts.data(), d.data(), g1.data(), nullptr, scratch.data());
   // Garbage inputs on lanes 1.. change nothing when their output gradient is zero.
