@@ -84,6 +84,18 @@ void FeaturePyramid::interpolate(const Vec3f& p, const Vec3i& m, float* out) con
   }
 }
 
+void FeaturePyramid::prefetch(const Vec3i& m) const {
+  for (const PyramidLevel& L : levels_) {
+    const size_t n = size_t(L.res) + 1;
+    const size_t base = L.vertex_index(m.x >> L.shift, m.y >> L.shift, m.z >> L.shift);
+    const float* v = L.value.data();
+    for (size_t off : {size_t(0), n, n * n, n * n + n}) {
+      __builtin_prefetch(v + (base + off) * kLevelChannels);
+      __builtin_prefetch(v + (base + off + 1) * kLevelChannels);
+    }
+  }
+}
+
 void FeaturePyramid::scatter_gradients(const GradientSlabs& slabs, const std::vector<float>& pos,
                                        const std::vector<int16_t>& micro, const std::vector<float>& d_feat) {
   const int F = channels();
@@ -109,6 +121,14 @@ void FeaturePyramid::scatter_gradients(const GradientSlabs& slabs, const std::ve
         while (ia < ea || ib < eb) {
           const bool take_a = ib >= eb || (ia < ea && slabs.samples[size_t(ia)] < slabs.samples[size_t(ib)]);
           const size_t s = size_t(take_a ? slabs.samples[size_t(ia++)] : slabs.samples[size_t(ib++)]);
+          // Prefetch the gradients the sample a few places ahead in this slab will add to.
+          if (ib + 3 < eb) {
+            const size_t q = size_t(slabs.samples[size_t(ib + 3)]);
+            const size_t vq =
+                L.vertex_index(micro[3 * q] >> L.shift, micro[3 * q + 1] >> L.shift, micro[3 * q + 2] >> L.shift);
+            const size_t n = size_t(L.res) + 1;
+            for (size_t off : {size_t(0), n, n * n, n * n + n}) __builtin_prefetch(&L.adam.grad[(vq + off) * 4], 1);
+          }
           const int cx = micro[3 * s] >> L.shift, cy = micro[3 * s + 1] >> L.shift, cz = micro[3 * s + 2] >> L.shift;
           float w[8];
           trilinear_weights(pos[3 * s] * inv - float(cx), pos[3 * s + 1] * inv - float(cy),
@@ -162,8 +182,16 @@ void FeaturePyramid::adam_step(const AdamStep& step) {
 #pragma omp parallel for schedule(dynamic, 1)
     for (int j = 0; j < n_lists; ++j) {
       auto& list = L.adam.touched_list[size_t(j)];
-      for (int32_t vtx : list) {
-        const size_t i = size_t(vtx) * kLevelChannels;
+      const size_t n_list = list.size();
+      for (size_t j = 0; j < n_list; ++j) {
+        if (j + 8 < n_list) {
+          const size_t f = size_t(list[j + 8]) * kLevelChannels;
+          __builtin_prefetch(&L.value[f], 1);
+          __builtin_prefetch(&L.adam.m[f], 1);
+          __builtin_prefetch(&L.adam.v[f], 1);
+          __builtin_prefetch(&L.adam.grad[f], 1);
+        }
+        const size_t i = size_t(list[j]) * kLevelChannels;
         step.update4(&L.value[i], &L.adam.m[i], &L.adam.v[i], &L.adam.grad[i]);
       }
       list.clear();
@@ -234,6 +262,16 @@ inline void block_corners(const Vec3i& m, int vid[8]) {
 }
 }  // namespace
 
+void BlockFeatures::prefetch(const Vec3i& m) const {
+  const int fr = micro_res_ / kMicroPerFine;
+  const int32_t b = fine_to_block_[linear_index(m.x >> 2, m.y >> 2, m.z >> 2, fr)];
+  if (b < 0) return;
+  int vid[8];
+  block_corners(m, vid);
+  const float* base = &value_[size_t(b) * kBlockVerts * size_t(channels_)];
+  for (int c = 0; c < 8; ++c) __builtin_prefetch(base + size_t(vid[c]) * size_t(channels_));
+}
+
 bool BlockFeatures::interpolate(const Vec3f& p, const Vec3i& m, float* out) const {
   const int F = channels_;
   const int fr = micro_res_ / kMicroPerFine;
@@ -299,7 +337,18 @@ void BlockFeatures::adam_step(const AdamStep& step) {
 #pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < n_lists; ++j) {
     auto& list = adam_.touched_list[size_t(j)];
-    for (int32_t vtx : list) {
+    const size_t n_list = list.size();
+    for (size_t j = 0; j < n_list; ++j) {
+      const int32_t vtx = list[j];
+      if (j + 4 < n_list) {
+        const size_t f = size_t(list[j + 4]) * F;
+        for (size_t k = 0; k < F; k += 16) {
+          __builtin_prefetch(&value_[f + k], 1);
+          __builtin_prefetch(&adam_.m[f + k], 1);
+          __builtin_prefetch(&adam_.v[f + k], 1);
+          __builtin_prefetch(&adam_.grad[f + k], 1);
+        }
+      }
       size_t k = 0;
       for (; k + 4 <= F; k += 4) {
         const size_t i = size_t(vtx) * F + k;

@@ -75,6 +75,8 @@ class FeaturePyramid {
 
   // Features at micro position p inside micro voxel m (F values).
   void interpolate(const Vec3f& p, const Vec3i& m, float* out) const;
+  // Asks the memory system for the values interpolate(., m) will read (a hint).
+  void prefetch(const Vec3i& m) const;
   // Adds the gradient of every sample (d_feat: F values per sample, rows of
   // `pos`/`micro` indexed by sample id) into the levels' Adam gradient arrays
   // and records touched vertices. Parallel over slabs.
@@ -132,6 +134,7 @@ class BlockFeatures {
   // Features at micro position p inside micro voxel m. Returns false (and
   // writes zeros) when the fine voxel has no block.
   bool interpolate(const Vec3f& p, const Vec3i& m, float* out) const;
+  void prefetch(const Vec3i& m) const;
   // Same contract as FeaturePyramid::scatter_gradients (straight-through
   // estimator when quantized). Slabs must be one fine voxel (4 micro) high.
   void scatter_gradients(const GradientSlabs& slabs, const std::vector<float>& pos, const std::vector<int16_t>& micro,

@@ -327,7 +327,7 @@ struct Trainer::State {
   }
 
   const float* mlp_weights(int m) const {
-    const auto& p = phase == Phase::Quantize ? mlp_eff : mlp_params;
+    const auto& p = phase >= Phase::Quantize ? mlp_eff : mlp_params;
     return p.data() + size_t(m) * layout.param_count;
   }
 
@@ -336,6 +336,13 @@ struct Trainer::State {
       pyramid.interpolate(p, m, out);
     else
       blocks.interpolate(p, m, out);
+  }
+
+  void prefetch_features(const Vec3i& m) const {
+    if (phase == Phase::Main)
+      pyramid.prefetch(m);
+    else
+      blocks.prefetch(m);
   }
 
   // Marches every ray in rounds; evaluates density for each new sample and
@@ -469,6 +476,10 @@ struct Trainer::State {
           const int nl = std::min(kLanes, w.end - c0);
           std::fill(x0.begin(), x0.end(), 0.f);
           for (int l = 0; l < nl; ++l) {
+            if (l + 4 < nl) {
+              const size_t q = size_t(grouped[size_t(c0 + l + 4)]);
+              prefetch_features({b.micro[3 * q], b.micro[3 * q + 1], b.micro[3 * q + 2]});
+            }
             const size_t s = size_t(grouped[size_t(c0 + l)]);
             float* f = &b.feat[s * size_t(F)];
             interpolate({b.pos[3 * s], b.pos[3 * s + 1], b.pos[3 * s + 2]},
@@ -852,10 +863,7 @@ struct Trainer::State {
         feature_quant = blocks.fit_quantization();
         blocks.set_quantization(feature_quant);
       }
-      mlp_eff.resize(mlp_params.size());
-      for (int m = 0; m < n_mlps; ++m)
-        fake_quantize_mlp(layout, &mlp_params[size_t(m) * layout.param_count],
-                          &mlp_eff[size_t(m) * layout.param_count]);
+      update_fake_quantized_mlps();
     }
     lap(kPhase);
 
@@ -915,7 +923,14 @@ struct Trainer::State {
       psnr_quantized = mse_ema > 0 ? -10.0 * std::log10(mse_ema) : 0;
       if (phase != Phase::Quantize) psnr_float = psnr_quantized;
       phase = Phase::Done;
+      update_fake_quantized_mlps();  // render() then reads the weights export_model(true) writes
     }
+  }
+
+  void update_fake_quantized_mlps() {
+    mlp_eff.resize(mlp_params.size());
+    for (int m = 0; m < n_mlps; ++m)
+      fake_quantize_mlp(layout, &mlp_params[size_t(m) * layout.param_count], &mlp_eff[size_t(m) * layout.param_count]);
   }
 
   AdamSettings adam_settings() const { return {cfg.adam_beta1, cfg.adam_beta2, cfg.adam_eps}; }
@@ -1112,6 +1127,7 @@ struct Trainer::State {
     expect_size("mlp_m", mlp_m.size(), mlp_params.size());
     expect_size("mlp_v", mlp_v.size(), mlp_params.size());
     layer_in_max = r.get<float>("layer_in_max");
+    if (phase >= Phase::Quantize) update_fake_quantized_mlps();
     float_blocks = r.get<float>("float_blocks");
     float_mlps = r.get<float>("float_mlps");
   }

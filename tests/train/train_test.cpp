@@ -1,7 +1,9 @@
 // End-to-end: a small dataset rendered from a procedural scene is learned,
 // exported, and rendered back with the reference renderer.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -12,6 +14,7 @@
 #include "model/model_io.h"
 #include "model/procedural.h"
 #include "render/reference.h"
+#include "train/config.h"
 #include "train/synthetic.h"
 #include "train/trainer.h"
 
@@ -20,11 +23,24 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// A temporary folder removed when the test process ends.
+struct TempDir {
+  fs::path path;
+  explicit TempDir(const std::string& name) : path(fs::temp_directory_path() / fmt::format("{}_{}", name, ::getpid())) {
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+};
+
 // 32 training and 8 test views at 64 x 64 of the "several" scene, made once.
 const fs::path& dataset_dir() {
+  static const TempDir tmp("edrnr_train_test");
   static const fs::path dir = [] {
-    fs::path d = fs::temp_directory_path() / fmt::format("edrnr_train_test_{}", ::getpid());
-    fs::remove_all(d);
+    const fs::path d = tmp.path / "several";
     ProceduralOptions po;
     po.micro_res = 64;
     const SceneModel scene = make_procedural_model("several", procedural_shapes("several"), po);
@@ -100,8 +116,139 @@ TEST(Train, LearnsAProceduralSceneAndExportsAValidModel) {
   const double pq = mean_psnr(t.quantized, test, ModelForm::Quantized);
   std::printf("train PSNR float %.2f quantized %.2f; test PSNR float %.2f quantized %.2f; %zu blocks %zu MLPs\n",
               t.stats.psnr_float, t.stats.psnr_quantized, pf, pq, t.quantized.block_count(), t.quantized.mlp_count());
-  EXPECT_GT(pf, 0.0);
-  EXPECT_GT(pq, 0.0);
+  // Measured: float 29.4 dB, quantized 30.3 dB (400 steps); asserted with a margin.
+  EXPECT_GT(pf, 27.0);
+  EXPECT_GT(pq, 27.0);
+  EXPECT_GT(t.stats.psnr_float, 27.0);
+  EXPECT_GT(t.stats.psnr_quantized, 27.0);
+}
+
+TrainConfig short_config() {
+  TrainConfig c = small_config();
+  c.iters = 100;
+  c.per_cv_fraction = 0.2f;
+  c.qat_fraction = 0.2f;
+  c.aabb_start = 32;
+  c.aabb_every = 32;
+  return c;
+}
+
+std::vector<uint8_t> model_bytes(const Trainer& t, bool quantized) {
+  return serialize_model(t.export_model(quantized));
+}
+
+TEST(Train, ResumedRunEndsInTheSameBitsAsAnUninterruptedOne) {
+  const Dataset data = load("train");
+  const TrainConfig c = short_config();
+  Trainer whole(data, c);
+  ASSERT_TRUE(whole.run({}));
+  // Interrupted in the main phase (step 30) and in the per-CV phase (step 70):
+  // each time continued from the checkpoint bytes in a new trainer.
+  std::vector<uint8_t> ckpt;
+  {
+    Trainer a(data, c);
+    TrainOptions o;
+    o.stop_after = 30;
+    ASSERT_FALSE(a.run(o));
+    EXPECT_EQ(a.stats().step, 30);
+    ckpt = a.checkpoint();
+  }
+  {
+    Trainer b(data, ckpt, "checkpoint 1");
+    EXPECT_EQ(b.stats().step, 30);
+    TrainOptions o;
+    o.stop_after = 70;
+    ASSERT_FALSE(b.run(o));
+    EXPECT_EQ(b.stats().phase, Phase::PerCv);
+    ckpt = b.checkpoint();
+  }
+  Trainer c3(data, ckpt, "checkpoint 2");
+  ASSERT_TRUE(c3.run({}));
+  EXPECT_EQ(model_bytes(c3, true), model_bytes(whole, true));
+  EXPECT_EQ(model_bytes(c3, false), model_bytes(whole, false));
+}
+
+TEST(Train, ResultDoesNotDependOnTheThreadCount) {
+  const Dataset data = load("train");
+  TrainOptions one, two;
+  one.threads = 1;
+  two.threads = 2;
+  Trainer a(data, short_config()), b(data, short_config());
+  ASSERT_TRUE(a.run(one));
+  ASSERT_TRUE(b.run(two));
+  EXPECT_EQ(model_bytes(a, true), model_bytes(b, true));
+}
+
+TEST(Train, ExportedModelRendersWhatTrainingRendered) {
+  // The trainer's own forward pass and render_reference on the exported model
+  // agree, in float (before quantization) and quantized (at the end).
+  const Dataset data = load("train");
+  const Dataset test = load("test");
+  Trainer t(data, short_config());
+  TrainOptions o;
+  o.stop_after = 80;  // the per-CV phase: float
+  ASSERT_FALSE(t.run(o));
+  ASSERT_EQ(t.stats().phase, Phase::PerCv);
+  auto max_diff = [](const Image& a, const Image& b) {
+    float m = 0.f;
+    for (size_t i = 0; i < a.data.size(); ++i) m = std::max(m, std::fabs(a.data[i] - b.data[i]));
+    return m;
+  };
+  RenderSettings rs;
+  const Camera& cam = test.frames[0].camera;
+  rs.form = ModelForm::Float;
+  EXPECT_LT(max_diff(t.render(cam), render_reference(t.export_model(false), cam, rs)), 1e-4f);
+  ASSERT_TRUE(t.run({}));
+  rs.form = ModelForm::Quantized;
+  EXPECT_LT(max_diff(t.render(cam), render_reference(t.export_model(true), cam, rs)), 1e-4f);
+}
+
+TEST(Train, RejectsBadInputWithClearErrors) {
+  auto message = [](auto&& f) -> std::string {
+    try {
+      f();
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "no error";
+  };
+  // A folder without transforms_train.json.
+  TempDir empty("edrnr_train_empty");
+  DatasetOptions o;
+  EXPECT_NE(message([&] { load_dataset(empty.path, o); }).find("transforms_train.json"), std::string::npos);
+  // No frames, and frames whose images were not loaded.
+  Dataset none;
+  none.root = "nowhere";
+  EXPECT_NE(message([&] { Trainer t(none, small_config()); }).find("no frames"), std::string::npos);
+  DatasetOptions cams_only;
+  cams_only.load_images = false;
+  const Dataset no_images = load_dataset(dataset_dir(), cams_only);
+  EXPECT_NE(message([&] { Trainer t(no_images, small_config()); }).find("no RGB image"), std::string::npos);
+  // A checkpoint from another dataset, and a damaged one.
+  const Dataset data = load("train");
+  const Dataset test = load("test");
+  Trainer t(data, short_config());
+  std::vector<uint8_t> ckpt = t.checkpoint();
+  EXPECT_NE(message([&] { Trainer r(test, ckpt, "ck"); }).find("different dataset"), std::string::npos);
+  ckpt[ckpt.size() / 2] ^= 1;
+  EXPECT_NE(message([&] { Trainer r(data, ckpt, "ck"); }).find("corrupt"), std::string::npos);
+  // Bad settings name the setting.
+  EXPECT_NE(message([] { parse_train_config("iters: 10\nlevles: [32]\n", "p.yaml"); }).find("'levles'"),
+            std::string::npos);
+  EXPECT_NE(message([] { parse_train_config("levels: [48]\n", "p.yaml"); }).find("levels"), std::string::npos);
+  EXPECT_NE(message([] { parse_train_config("iters: many\n", "p.yaml"); }).find("'iters'"), std::string::npos);
+  EXPECT_NE(message([] { parse_train_config("color_hidden: [256, 256]\n", "p.yaml"); }).find("MLP cache"),
+            std::string::npos);
+}
+
+TEST(Train, PresetsAreValid) {
+  for (const auto& e : fs::directory_iterator(fs::path(EDRNR_SOURCE_DIR) / "configs" / "train")) {
+    if (e.path().extension() != ".yaml") continue;
+    const TrainConfig c = load_train_config(e.path());
+    EXPECT_NO_THROW(c.validate()) << e.path();
+    // The YAML dump reads back to the same settings.
+    EXPECT_EQ(to_yaml(parse_train_config(to_yaml(c), "dump")), to_yaml(c)) << e.path();
+  }
 }
 
 }  // namespace
