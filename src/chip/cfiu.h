@@ -45,7 +45,18 @@ class Cfiu {
 
   // Writes F interpolated features of a sample in `block`, whose line must be
   // valid and reserved (CacheAccess and fill before; see FeatureCache).
+  // The same as read_corners() followed by weighted_sum().
   void interpolate(uint32_t block, const SampleCoord& s, int32_t* out);
+
+  // The bank side of interpolate(): reads the sample's 8 corners from the
+  // line of `block` (which becomes most recently used) and counts the bank
+  // reads. Returns the extra cycles its bank conflicts cost.
+  int read_corners(uint32_t block, const SampleCoord& s);
+  // The arithmetic side of interpolate(): the F features of the sample from
+  // the model's codes of `block`. Reads only the model and the numerics, so it
+  // may run on another thread while the cache changes. The sum is exact, so
+  // its order (here corner order; bank order in the hardware) cannot change it.
+  void weighted_sum(uint32_t block, const SampleCoord& s, int32_t* out) const;
 
   int feature_channels() const { return channels_; }
   const CfiuCounters& counters() const { return counters_; }

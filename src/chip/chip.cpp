@@ -76,7 +76,8 @@ ChipConfig chip_config_from_yaml(const YAML::Node& node, std::string_view where_
   if (!node || node.IsNull()) return c;
   for_each_key(node, where,
                {"rp_buffer_capacity", "rp_rob", "ooo_queue_depth", "feature_cache", "mlp_cache_bytes",
-                "micro_grid_cache_bytes", "functional_fill_latency_issues", "render", "switches", "numerics"},
+                "micro_grid_cache_bytes", "functional_fill_latency_issues", "render", "switches", "numerics",
+                "simulator"},
                [&](const std::string& key, const YAML::Node& v, const std::string& at) {
                  if (key == "rp_buffer_capacity") c.rp_buffer_capacity = scalar<int>(v, at, "an integer");
                  if (key == "ooo_queue_depth") c.ooo_queue_depth = scalar<int>(v, at, "an integer");
@@ -122,6 +123,8 @@ ChipConfig chip_config_from_yaml(const YAML::Node& node, std::string_view where_
                                   if (k == "ooo_issue") c.switches.ooo_issue = b;
                                 });
                  if (key == "numerics") c.numerics = numerics_from_yaml(v, at);
+                 // "simulator": timing, memory and energy of the cycle simulator
+                 // (sim/sim_config.h); the functional model does not use it.
                });
   try {
     validate(c);
@@ -256,9 +259,7 @@ void export_chip_stats(const ChipCounters& c, StatsRegistry& s, const std::strin
 
 // ---------------------------------------------------------------- render
 
-namespace {
-
-void check_model(const SceneModel& m) {
+void check_chip_model(const SceneModel& m) {
   if (m.micro_res <= 0 || m.micro_res % 32)
     fail("model micro resolution {} is not a positive multiple of 32", m.micro_res);
   if (m.micro_res > 1024) fail("model micro resolution {} exceeds the chip's 1024", m.micro_res);
@@ -277,6 +278,8 @@ void check_model(const SceneModel& m) {
   for (size_t i = 0; i < coarse.size(); ++i)
     if (coarse.get(i) && m.coarse_to_mlp[i] < 0) fail("model: occupied coarse voxel {} has no MLP", i);
 }
+
+namespace {
 
 // A feature block requested from DRAM, due at an issue number.
 struct PendingFill {
@@ -535,7 +538,7 @@ class FunctionalChip {
 
 Image render_chip(const SceneModel& model, const Camera& camera, const ChipConfig& config, ChipCounters* counters) {
   validate(config);
-  check_model(model);
+  check_chip_model(model);
   if (camera.width < 1 || camera.height < 1) fail("camera image size {}x{} is empty", camera.width, camera.height);
   FunctionalChip chip(model, camera, config);
   return chip.run(counters);

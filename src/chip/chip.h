@@ -134,6 +134,11 @@ struct ChipCounters {
 // its unit and description, set to the values in `c`.
 void export_chip_stats(const ChipCounters& c, StatsRegistry& stats, const std::string& prefix = "chip");
 
+// Throws Error naming what is wrong unless the model is one the chip can
+// render: micro resolution, bitmaps, lookups (finalize()), feature channels,
+// an MLP for every occupied coarse voxel.
+void check_chip_model(const SceneModel& model);
+
 // Renders the camera's image through the chip model. The model must have its
 // INT4 features and INT8 MLPs and be finalize()d. Throws Error on a bad
 // config, camera or model.

@@ -77,6 +77,7 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
     const uint64_t word = micro_word(fine_index);
     ++counters_.micro_word_reads;
     counters_.micro_word_hits += micro_grid_cache_.access(fine_index);
+    if (micro_read_log_) micro_read_log_->push_back(fine_index);
     batch.rp = rp_pointer;
     batch.cv_tag = cv_tag;
     batch.fine_index = fine_index;

@@ -65,6 +65,11 @@ class Ftu {
   // in the CV (the RP leaves it: a CV transition).
   bool run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& batch);
 
+  // When `log` is set, run() appends the linear index of every fine voxel
+  // whose micro-grid word it reads, in order (for a timing shell that models
+  // the micro-grid cache); nullptr stops it. The log is never cleared here.
+  void set_micro_read_log(std::vector<uint32_t>* log) { micro_read_log_ = log; }
+
   // The 64 micro bits of a fine voxel, bit lx + 4 (ly + 4 lz).
   uint64_t micro_word(uint32_t fine_index) const;
   const FtuCounters& counters() const { return counters_; }
@@ -74,6 +79,7 @@ class Ftu {
   const RayMath& math_;
   bool lag_first_;
   LruTags micro_grid_cache_;
+  std::vector<uint32_t>* micro_read_log_ = nullptr;
   FtuCounters counters_;
 };
 

@@ -1,0 +1,128 @@
+#pragma once
+// Configuration of the cycle simulator: the functional chip (ChipConfig) plus
+// the timing of each unit, the memory system, the energy tables and the
+// operating points. All of it comes from one chip preset (configs/chip/*.yaml):
+// the functional keys at the top level, the rest under `simulator:`
+// (docs/simulator.md lists every key with its reason).
+#include <yaml-cpp/yaml.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "chip/chip.h"
+#include "sim/cache.h"
+#include "sim/dram_config.h"
+#include "sim/energy.h"
+
+namespace edrnr::sim {
+
+// A traversal unit (CTU, FTU): each LFAU iteration (selection plus one bitmap
+// check) takes cycles_per_iteration cycles, and the ray positions it computes
+// (cell exits, candidate tests) are shared by position_evals_per_cycle
+// position units.
+struct TraversalTiming {
+  int cycles_per_iteration = 1;
+  int position_evals_per_cycle = 4;
+  bool operator==(const TraversalTiming&) const = default;
+};
+
+struct SimTiming {
+  // Front end (ZORG, ABT, TSPS): an RP takes max(zorg_cycles_per_rp,
+  // ceil(TSPS position evaluations / tsps_position_evals_per_cycle)) cycles;
+  // its pointer reaches the CTU front_end_latency_cycles later.
+  int zorg_cycles_per_rp = 1;
+  int tsps_position_evals_per_cycle = 24;
+  int front_end_latency_cycles = 6;
+  TraversalTiming ctu;
+  TraversalTiming ftu;
+  // CFIU: cycles_per_sample per sample plus one per bank conflict; its result
+  // reaches the TME latency_cycles later through a queue of latency + slots.
+  int cfiu_cycles_per_sample = 1;
+  int cfiu_latency_cycles = 4;
+  int cfiu_fifo_slots = 4;
+  // TME: ceil(MACs per sample / macs_per_cycle) cycles per sample; a CV switch
+  // copies the MLP into the MAC array at weight_load_bytes_per_cycle.
+  int tme_macs_per_cycle = 4096;
+  int tme_latency_cycles = 12;
+  int tme_fifo_slots = 4;
+  int tme_weight_load_bytes_per_cycle = 64;
+  // VRU: cycles per sample; the retire/reschedule decision follows the last
+  // sample of a batch latency_cycles later.
+  int vru_cycles_per_sample = 1;
+  int vru_latency_cycles = 2;
+  bool operator==(const SimTiming&) const = default;
+};
+
+// Geometry and timing of a tag cache in front of DRAM; its size comes from
+// the functional config (micro_grid_cache_bytes, mlp_cache_bytes).
+struct SimCacheConfig {
+  uint64_t line_bytes = 64;
+  uint64_t ways = 4;  // 0: fully associative
+  Replacement replacement = Replacement::Lru;
+  uint64_t random_seed = 1;
+  size_t mshr_entries = 4;
+  uint64_t hit_latency_cycles = 1;
+  bool operator==(const SimCacheConfig&) const = default;
+};
+
+struct SimMemory {
+  std::string dram_source;  // the preset name or file the DRAM config came from
+  DramConfig dram;
+  uint32_t max_request_bytes = 64;  // larger transfers are split into DRAM requests of at most this size
+  bool preload_bitmaps = true;      // read the coarse and fine bitmaps from DRAM before traversal starts
+  bool write_output = true;         // write each finished RP's record (pixels, coordinates) to DRAM
+  uint32_t output_record_bytes = 16;
+  SimCacheConfig micro_grid_cache{64, 4, Replacement::Lru, 1, 4, 1};
+  SimCacheConfig mlp_cache{64, 0, Replacement::Lru, 1, 8, 1};
+};
+
+enum class DramEnergySource {
+  Events,  // the energy table's dram_bit per bit moved (whole interface)
+  Model,   // the DDR3 model's own current-based energy (DRAM core only)
+};
+
+struct SimEnergy {
+  std::filesystem::path events_csv;   // empty: no energy evaluation
+  std::filesystem::path leakage_csv;  // empty: no leakage
+  double leakage_voltage_exponent = 1.0;
+  DramEnergySource dram = DramEnergySource::Events;
+};
+
+struct SimConfig {
+  ChipConfig chip;
+  double clock_MHz = 380.0;  // core clock
+  SimTiming timing;
+  SimMemory memory;
+  SimEnergy energy;
+  std::vector<OperatingPoint> operating_points;  // ascending frequency; the voltage at a clock comes from here
+  uint64_t hit_rate_window_cycles = 20000;       // window of the hit-rate series (Fig. 8)
+};
+
+// Throws Error naming the field when a value is out of range.
+void validate(const SimConfig& config);
+
+// Reads a chip preset. The `simulator` section's DRAM (a preset name looked up
+// in dram_search_dirs, a path, or a map in the configs/dram schema) and energy
+// table paths are resolved relative to base_dir. Missing keys keep their
+// defaults; an unknown key or a bad value throws Error naming `where` and the key.
+SimConfig sim_config_from_yaml(const YAML::Node& node, std::string_view where, const std::filesystem::path& base_dir,
+                               const std::vector<std::filesystem::path>& dram_search_dirs);
+// Loads a preset file; DRAM presets are looked for beside the chip presets
+// (<dir>/../dram) and then in dram_search_dirs.
+SimConfig load_sim_config(const std::filesystem::path& path,
+                          const std::vector<std::filesystem::path>& dram_search_dirs = {});
+// The fully resolved config: the functional keys plus a `simulator` section
+// with the DRAM inline and absolute table paths (sim_config_from_yaml reads it
+// back to the same values).
+YAML::Node sim_config_to_yaml(const SimConfig& config);
+
+// The operating point at a clock: the lowest listed point whose frequency is
+// at least the clock, with the clock's own frequency. Above the highest point
+// its voltage is used and `extrapolated` (optional) is set. Throws Error if no
+// operating point is configured.
+OperatingPoint operating_point_at(const SimConfig& config, double clock_MHz, bool* extrapolated = nullptr);
+
+}  // namespace edrnr::sim

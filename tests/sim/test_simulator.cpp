@@ -1,0 +1,317 @@
+// The cycle simulator end to end: the image against the functional model,
+// statistics invariants, determinism, frame rate against the core clock,
+// configuration round trips.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+
+#include "chip/chip.h"
+#include "core/error.h"
+#include "model/footprint.h"
+#include "model/procedural.h"
+#include "render/cameras.h"
+#include "sim/memory_system.h"
+#include "sim/sim_config.h"
+#include "sim/simulator.h"
+
+namespace edrnr::sim {
+namespace {
+
+const std::filesystem::path kPreset = std::filesystem::path(EDRNR_SOURCE_DIR) / "configs/chip/edr_nr_40nm.yaml";
+
+const SceneModel& several(int micro_res) {
+  static const SceneModel m32 = [] {
+    ProceduralOptions o;
+    o.micro_res = 32;
+    o.seed = 3;
+    return make_procedural_model("several", procedural_shapes("several"), o);
+  }();
+  static const SceneModel m64 = [] {
+    ProceduralOptions o;
+    o.micro_res = 64;
+    o.seed = 7;
+    return make_procedural_model("several", procedural_shapes("several"), o);
+  }();
+  return micro_res == 32 ? m32 : m64;
+}
+
+const SimConfig& preset() {
+  static const SimConfig c = load_sim_config(kPreset);
+  return c;
+}
+
+Camera camera(int w, int h, double azimuth = 30.0) { return orbit_camera(w, h, azimuth, 25.0, 4.0, 50.0); }
+
+bool same_bits(const Image& a, const Image& b) {
+  return a.width == b.width && a.height == b.height && a.channels == b.channels && a.data == b.data;
+}
+
+TEST(Simulator, ImageIsBitIdenticalToTheFunctionalModel) {
+  for (int res : {32, 64}) {
+    const SceneModel& m = several(res);
+    for (double azimuth : {30.0, 200.0}) {
+      const Camera cam = camera(27, 21, azimuth);  // odd sizes: partial quads
+      const Image functional = render_chip(m, cam, preset().chip);
+      for (int threads : {1, 2}) {
+        SimOptions opt;
+        opt.threads = threads;
+        const SimResult r = simulate_chip(m, cam, preset(), opt);
+        EXPECT_TRUE(same_bits(r.image, functional))
+            << "micro_res " << res << " azimuth " << azimuth << " threads " << threads;
+      }
+    }
+  }
+}
+
+TEST(Simulator, SwitchesAndTinyBuffersKeepTheImage) {
+  const SceneModel& m = several(64);
+  const Camera cam = camera(23, 17);
+  const Image functional = render_chip(m, cam, preset().chip);
+  std::vector<std::pair<const char*, SimConfig>> variants;
+  auto add = [&](const char* name, auto edit) {
+    SimConfig c = preset();
+    edit(c);
+    variants.push_back({name, c});
+  };
+  add("everything off", [](SimConfig& c) {
+    c.chip.switches = {false, false, false, false, false};
+    c.chip.bank_mapping = chip::BankMapping::Linear;
+  });
+  add("tiny buffers", [](SimConfig& c) {
+    c.chip.rp_buffer_capacity = 3;
+    c.chip.rp_rob = {.entries = 2, .entry_depth = 1, .recent_tags = 1};
+    c.chip.ooo_queue_depth = 2;
+    c.chip.feature_cache_bytes = 8000;  // 8 blocks
+    c.chip.mshr_entries = 1;
+    c.memory.micro_grid_cache = {8, 1, Replacement::Fifo, 1, 1, 1};  // one word per line, direct mapped
+    c.chip.micro_grid_cache_bytes = 64;
+    c.memory.mlp_cache.mshr_entries = 1;
+    c.timing.cfiu_fifo_slots = 1;
+    c.timing.tme_fifo_slots = 1;
+  });
+  add("slow everything", [](SimConfig& c) {
+    c.timing.tme_macs_per_cycle = 100;
+    c.timing.cfiu_cycles_per_sample = 3;
+    c.timing.vru_cycles_per_sample = 2;
+    c.timing.ctu.cycles_per_iteration = 5;
+    c.timing.ftu.position_evals_per_cycle = 1;
+    c.clock_MHz = 2000;
+  });
+  for (const auto& [name, cfg] : variants) {
+    const SimResult r = simulate_chip(m, cam, cfg);
+    EXPECT_TRUE(same_bits(r.image, functional)) << name;
+  }
+}
+
+TEST(Simulator, SameInputSameBits) {
+  const SceneModel& m = several(64);
+  const Camera cam = camera(32, 32);
+  SimOptions a, b;
+  b.threads = 2;
+  const SimResult r1 = simulate_chip(m, cam, preset(), a);
+  const SimResult r2 = simulate_chip(m, cam, preset(), a);
+  const SimResult r3 = simulate_chip(m, cam, preset(), b);
+  EXPECT_EQ(r1.stats->to_json(), r2.stats->to_json());
+  EXPECT_EQ(r1.stats->to_json(), r3.stats->to_json());  // the worker thread changes nothing
+  EXPECT_TRUE(same_bits(r1.image, r3.image));
+  EXPECT_EQ(r1.hit_rate_series, r3.hit_rate_series);
+}
+
+TEST(Simulator, StatisticsObeyTheirInvariants) {
+  const SceneModel& m = several(64);
+  const Camera cam = camera(40, 36);
+  const SimResult r = simulate_chip(m, cam, preset());
+  const StatsRegistry& s = *r.stats;
+  const ChipCounters& c = r.chip;
+  ASSERT_GT(c.ftu.samples, 0u);
+
+  // Every sample generated is interpolated, evaluated and composited (or
+  // skipped for a stopped ray) exactly once.
+  EXPECT_EQ(c.cfiu.samples, c.ftu.samples);
+  EXPECT_EQ(c.tme.samples, c.ftu.samples);
+  EXPECT_EQ(c.vru.samples + c.vru.samples_skipped, c.ftu.samples);
+  EXPECT_EQ(r.summary.samples, c.ftu.samples);
+  EXPECT_EQ(c.cfiu.corner_reads, 8 * c.ftu.samples);
+  EXPECT_EQ(c.ooo.issued, c.ftu.batches);
+
+  // Every pixel's RP went through: ceil(W/2) * ceil(H/2) Z-order packets.
+  EXPECT_EQ(c.packets, uint64_t(20 * 18));
+  EXPECT_EQ(c.rps_finished + c.packets_dropped, c.packets);
+
+  // Bytes read cover at least the distinct bytes touched, which lie inside
+  // the model's footprint.
+  const DramFootprint fp = dram_footprint(m);
+  for (const char* type : {"micro_grid", "features", "mlp_weights", "bitmaps"}) {
+    const std::string p = std::string("mem.") + type;
+    EXPECT_GE(s.get(p + ".read_bytes"), s.get(p + ".unique_read_bytes")) << type;
+  }
+  EXPECT_LE(s.get("mem.features.unique_read_bytes"), double(fp.feature_bytes));
+  EXPECT_LE(s.get("mem.micro_grid.unique_read_bytes"), double(fp.micro_grid_bytes + 64));
+  EXPECT_EQ(s.get("mem.bitmaps.read_bytes"), double(fp.coarse_bitmap_bytes + fp.fine_bitmap_bytes));
+  // One feature block (125 vertices x 16 INT4 channels = 1000 bytes) per fetch.
+  EXPECT_EQ(s.get("mem.features.read_bytes"), 1000.0 * s.get("cache.features.misses_issued"));
+  // The DRAM moves whole bursts: at least what was asked for.
+  double asked = 0;
+  for (const char* type : {"bitmaps", "micro_grid", "features", "mlp_weights"})
+    asked += s.get(std::string("mem.") + type + ".read_bytes");
+  EXPECT_GE(s.get("dram.read_bytes"), asked);
+  // One 16-byte output record per RP.
+  EXPECT_EQ(s.get("mem.rp_output.write_bytes"), 16.0 * double(c.packets));
+
+  // Hits and misses add up, per cache.
+  for (const char* cache : {"cache.micro_grid", "cache.mlp_weights", "cache.features"}) {
+    const std::string p = cache;
+    EXPECT_EQ(s.get(p + ".hits") + s.get(p + ".misses"), s.get(p + ".accesses")) << cache;
+  }
+  EXPECT_EQ(s.get("cache.micro_grid.accesses"), double(c.ftu.micro_word_reads));
+  EXPECT_EQ(s.get("cache.features.accesses"), double(c.ftu.batches));
+
+  // No faster than the slowest sample stage allows.
+  EXPECT_GE(double(r.summary.cycles), double(r.summary.samples) / r.summary.peak_samples_per_cycle);
+  EXPECT_LE(r.summary.samples_per_cycle, r.summary.peak_samples_per_cycle);
+
+  // Each unit is in exactly one state per cycle.
+  for (const char* unit : {"front_end", "ctu", "ftu", "ooo_si", "cfiu", "tme", "vru"}) {
+    double sum = 0;
+    for (const char* st : {"busy", "stall_output", "stall_memory", "idle"})
+      sum += s.get(std::string("sim.unit.") + unit + "." + st + "_cycles");
+    EXPECT_EQ(sum, double(r.summary.cycles)) << unit;
+  }
+  // The VRU is busy exactly one cycle per sample (vru.cycles_per_sample = 1).
+  EXPECT_EQ(s.get("sim.unit.vru.busy_cycles"), double(c.ftu.samples));
+  EXPECT_DOUBLE_EQ(r.summary.fps, 380e6 / double(r.summary.cycles));
+
+  // Energy events: 3136 MACs per sample for the default MLP (density net
+  // 16x32 + 32x16, colour net 31x32 + 32x32 + 32x3), 8 bank reads per sample.
+  EXPECT_EQ(r.energy_run.event_counts.at("int8_mult"), 3136 * c.ftu.samples);
+  EXPECT_EQ(r.energy_run.event_counts.at("feature_sram_read"), 8 * c.ftu.samples);
+  EXPECT_EQ(r.energy_run.event_counts.at("dram_bit"),
+            8 * uint64_t(s.get("dram.read_bytes") + s.get("dram.write_bytes")));
+  ASSERT_TRUE(r.energy.has_value());
+  EXPECT_DOUBLE_EQ(r.energy->point.voltage_V, 1.21);
+  EXPECT_GT(r.energy->nJ_per_pixel, 0.0);
+}
+
+TEST(Simulator, FrameRateRisesWithTheClockButSubLinearlyWhenMemoryWaits) {
+  const SceneModel& m = several(64);
+  const Camera cam = camera(32, 32);
+  double last_fps = 0;
+  uint64_t last_cycles = 0;
+  for (double mhz : {50.0, 150.0, 380.0, 1500.0}) {
+    SimConfig c = preset();
+    c.clock_MHz = mhz;
+    const SimResult r = simulate_chip(m, cam, c);
+    EXPECT_GE(r.summary.fps, last_fps) << mhz << " MHz";
+    // The DRAM keeps its own clock: the faster core waits more of its cycles.
+    EXPECT_GE(r.summary.cycles, last_cycles) << mhz << " MHz";
+    last_fps = r.summary.fps;
+    last_cycles = r.summary.cycles;
+  }
+  SimConfig slow = preset(), fast = preset();
+  slow.clock_MHz = 50;
+  fast.clock_MHz = 1500;
+  const double f50 = simulate_chip(m, cam, slow).summary.fps, f1500 = simulate_chip(m, cam, fast).summary.fps;
+  EXPECT_LT(f1500 / f50, 1500.0 / 50.0);
+}
+
+TEST(Simulator, ProgressReachesEveryPacket) {
+  const SceneModel& m = several(32);
+  SimOptions opt;
+  opt.progress_interval_cycles = 100;
+  std::vector<SimProgress> seen;
+  opt.progress = [&](const SimProgress& p) { seen.push_back(p); };
+  const SimResult r = simulate_chip(m, camera(16, 10), preset(), opt);
+  ASSERT_GE(seen.size(), 2u);
+  for (size_t i = 1; i < seen.size(); ++i) EXPECT_GE(seen[i].rps_done, seen[i - 1].rps_done);
+  EXPECT_EQ(seen.back().rps_total, 8u * 5u);
+  EXPECT_EQ(seen.back().rps_done, 8u * 5u);
+  EXPECT_EQ(seen.back().cycle, r.summary.cycles);
+}
+
+TEST(Simulator, TraceCoversTheWindow) {
+  SimOptions opt;
+  opt.trace_start_cycle = 100;
+  opt.trace_cycles = 400;
+  const SimResult r = simulate_chip(several(32), camera(16, 16), preset(), opt);
+  ASSERT_TRUE(r.trace.contains("traceEvents"));
+  int complete = 0;
+  for (const auto& e : r.trace["traceEvents"]) {
+    if (e["ph"] != "X") continue;
+    ++complete;
+    const uint64_t start = e["args"]["start_cycle"], n = e["args"]["cycles"];
+    EXPECT_GE(start, 100u);
+    EXPECT_LE(start + n, 500u);
+    EXPECT_DOUBLE_EQ(double(e["ts"]), double(start) / 380.0);
+  }
+  EXPECT_GT(complete, 0);
+}
+
+TEST(Simulator, RejectsBadInput) {
+  SimOptions opt;
+  opt.threads = 3;
+  EXPECT_THROW(simulate_chip(several(32), camera(8, 8), preset(), opt), Error);
+  SimConfig c = preset();
+  c.timing.tme_macs_per_cycle = 0;
+  try {
+    simulate_chip(several(32), camera(8, 8), c);
+    FAIL() << "expected an Error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("tme.macs_per_cycle"), std::string::npos) << e.what();
+  }
+}
+
+TEST(SimConfig, PresetRoundTripsThroughItsResolvedForm) {
+  const SimConfig& a = preset();
+  EXPECT_EQ(a.clock_MHz, 380.0);
+  EXPECT_EQ(a.chip.feature_cache_bytes, 262144);
+  EXPECT_EQ(a.memory.dram.bus_width_bits, 16u);
+  EXPECT_EQ(a.operating_points.size(), 5u);
+  YAML::Emitter e;
+  e << sim_config_to_yaml(a);
+  const SimConfig b = sim_config_from_yaml(YAML::Load(e.c_str()), "resolved", "", {});
+  EXPECT_EQ(b.chip.rp_buffer_capacity, a.chip.rp_buffer_capacity);
+  EXPECT_EQ(b.clock_MHz, a.clock_MHz);
+  EXPECT_EQ(b.timing, a.timing);
+  EXPECT_EQ(b.memory.micro_grid_cache, a.memory.micro_grid_cache);
+  EXPECT_EQ(b.memory.mlp_cache, a.memory.mlp_cache);
+  EXPECT_EQ(b.memory.dram.tRCD, a.memory.dram.tRCD);
+  EXPECT_EQ(b.memory.dram.name, a.memory.dram.name);
+  EXPECT_EQ(b.energy.events_csv, std::filesystem::absolute(a.energy.events_csv).lexically_normal());
+  EXPECT_EQ(b.operating_points.back().voltage_V, 1.21);
+  // The functional model reads the same preset (it skips the simulator section).
+  EXPECT_EQ(load_chip_config(kPreset).ooo_queue_depth, a.chip.ooo_queue_depth);
+}
+
+TEST(SimConfig, ErrorsNameTheKey) {
+  auto expect_error = [](const std::string& yaml, const std::string& needle) {
+    try {
+      sim_config_from_yaml(YAML::Load(yaml), "test.yaml", std::filesystem::path(EDRNR_SOURCE_DIR) / "configs/chip", {});
+      FAIL() << "expected an Error for " << yaml;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  const std::string dram = "simulator: {memory: {dram: ddr3-1600-4gb-x16-16bit}, ";
+  expect_error(dram + "timing: {tme: {macs: 3}}}", "test.yaml.simulator.timing.tme: unknown key 'macs'");
+  expect_error(dram + "clock_MHz: fast}", "test.yaml.simulator.clock_MHz");
+  expect_error(dram + "timing: {vru: {cycles_per_sample: 0}}}", "vru.cycles_per_sample");
+  expect_error(dram + "energy: {dram: both}}", "'both' is not events or model");
+  expect_error("simulator: {memory: {dram: no-such-part}}", "no-such-part");
+  expect_error("simulator: {clock_MHz: 100}", "no DRAM configured");
+}
+
+TEST(SimConfig, VoltageComesFromTheNextOperatingPointUp) {
+  const SimConfig& c = preset();
+  bool extrapolated = true;
+  EXPECT_DOUBLE_EQ(operating_point_at(c, 50, &extrapolated).voltage_V, 0.79);
+  EXPECT_FALSE(extrapolated);
+  EXPECT_DOUBLE_EQ(operating_point_at(c, 100, &extrapolated).voltage_V, 0.98);
+  EXPECT_DOUBLE_EQ(operating_point_at(c, 100).frequency_MHz, 100.0);
+  EXPECT_DOUBLE_EQ(operating_point_at(c, 380).voltage_V, 1.21);
+  EXPECT_DOUBLE_EQ(operating_point_at(c, 500, &extrapolated).voltage_V, 1.21);
+  EXPECT_TRUE(extrapolated);
+}
+
+}  // namespace
+}  // namespace edrnr::sim
