@@ -216,6 +216,8 @@ void export_chip_stats(const ChipCounters& c, StatsRegistry& s, const std::strin
   cnt("ftu.micro_checks", "lookups", "micro checks (from micro-grid words)", c.ftu.micro_checks);
   cnt("ftu.micro_word_reads", "words", "64-bit micro-grid bitmap words read", c.ftu.micro_word_reads);
   val("ftu.micro_grid_hit_rate", "ratio", "micro-grid bitmap cache hit rate", c.micro_grid_hit_rate());
+  cnt("ftu.candidate_tests", "candidates", "candidates of occupied leaves tested against their micro bit",
+      c.ftu.candidate_tests);
   cnt("ftu.samples", "samples", "samples generated", c.ftu.samples);
   cnt("ftu.batches", "CCRP_SPs", "sample batches (one RP, one fine voxel)", c.ftu.batches);
   val("ftu.rays_per_iteration", "rays", "rays advancing together per RP in fine traversal",

@@ -109,6 +109,7 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
           const Vec3i mk = math_.micro_voxel(math_.point(ray.ray, k));
           ++counters_.position_evals;
           if (Vec3i{mk.x / kLeafCellMicro, mk.y / kLeafCellMicro, mk.z / kLeafCellMicro} != leaf_cell) break;
+          ++counters_.candidate_tests;
           if (mk != last_micro) {
             ++counters_.micro_checks;
             last_micro = mk;

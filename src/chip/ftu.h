@@ -48,6 +48,7 @@ struct FtuCounters {
   uint64_t micro_word_hits = 0;   // of those, hits in the micro-grid bitmap cache
   uint64_t leaf_checks = 0;
   uint64_t micro_checks = 0;
+  uint64_t candidate_tests = 0;  // candidates of occupied leaves tested against their micro bit
   uint64_t samples = 0;
   uint64_t batches = 0;
   uint64_t position_evals = 0;

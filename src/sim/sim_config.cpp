@@ -46,19 +46,20 @@ void for_each_key(const YAML::Node& node, const std::string& where, std::initial
   }
 }
 
-void read_traversal(const YAML::Node& node, const std::string& where, TraversalTiming& t) {
-  for_each_key(node, where, {"cycles_per_iteration", "position_evals_per_cycle"},
-               [&](const std::string& k, const YAML::Node& v, const std::string& at) {
-                 if (k == "cycles_per_iteration") t.cycles_per_iteration = integer(v, at);
-                 if (k == "position_evals_per_cycle") t.position_evals_per_cycle = integer(v, at);
-               });
-}
-
 void read_timing(const YAML::Node& node, const std::string& where, SimTiming& t) {
   for_each_key(node, where, {"front_end", "ctu", "ftu", "cfiu", "tme", "vru"},
                [&](const std::string& key, const YAML::Node& v, const std::string& at) {
-                 if (key == "ctu") read_traversal(v, at, t.ctu);
-                 if (key == "ftu") read_traversal(v, at, t.ftu);
+                 if (key == "ctu")
+                   for_each_key(v, at, {"cycles_per_iteration"},
+                                [&](const std::string&, const YAML::Node& x, const std::string& a) {
+                                  t.ctu_cycles_per_iteration = integer(x, a);
+                                });
+                 if (key == "ftu")
+                   for_each_key(v, at, {"cycles_per_iteration", "lanes"},
+                                [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                                  if (k == "cycles_per_iteration") t.ftu_cycles_per_iteration = integer(x, a);
+                                  if (k == "lanes") t.ftu_lanes = integer(x, a);
+                                });
                  if (key == "front_end")
                    for_each_key(v, at, {"zorg_cycles_per_rp", "tsps_position_evals_per_cycle", "latency_cycles"},
                                 [&](const std::string& k, const YAML::Node& x, const std::string& a) {
@@ -204,10 +205,9 @@ void validate(const SimConfig& c) {
   at_least(t.zorg_cycles_per_rp, 1, "front_end.zorg_cycles_per_rp");
   at_least(t.tsps_position_evals_per_cycle, 1, "front_end.tsps_position_evals_per_cycle");
   at_least(t.front_end_latency_cycles, 1, "front_end.latency_cycles");
-  at_least(t.ctu.cycles_per_iteration, 1, "ctu.cycles_per_iteration");
-  at_least(t.ctu.position_evals_per_cycle, 1, "ctu.position_evals_per_cycle");
-  at_least(t.ftu.cycles_per_iteration, 1, "ftu.cycles_per_iteration");
-  at_least(t.ftu.position_evals_per_cycle, 1, "ftu.position_evals_per_cycle");
+  at_least(t.ctu_cycles_per_iteration, 1, "ctu.cycles_per_iteration");
+  at_least(t.ftu_cycles_per_iteration, 1, "ftu.cycles_per_iteration");
+  at_least(t.ftu_lanes, 1, "ftu.lanes");
   at_least(t.cfiu_cycles_per_sample, 1, "cfiu.cycles_per_sample");
   at_least(t.cfiu_latency_cycles, 1, "cfiu.latency_cycles");
   at_least(t.cfiu_fifo_slots, 1, "cfiu.fifo_slots");
@@ -306,10 +306,9 @@ YAML::Node sim_config_to_yaml(const SimConfig& c) {
   timing["front_end"]["zorg_cycles_per_rp"] = t.zorg_cycles_per_rp;
   timing["front_end"]["tsps_position_evals_per_cycle"] = t.tsps_position_evals_per_cycle;
   timing["front_end"]["latency_cycles"] = t.front_end_latency_cycles;
-  timing["ctu"]["cycles_per_iteration"] = t.ctu.cycles_per_iteration;
-  timing["ctu"]["position_evals_per_cycle"] = t.ctu.position_evals_per_cycle;
-  timing["ftu"]["cycles_per_iteration"] = t.ftu.cycles_per_iteration;
-  timing["ftu"]["position_evals_per_cycle"] = t.ftu.position_evals_per_cycle;
+  timing["ctu"]["cycles_per_iteration"] = t.ctu_cycles_per_iteration;
+  timing["ftu"]["cycles_per_iteration"] = t.ftu_cycles_per_iteration;
+  timing["ftu"]["lanes"] = t.ftu_lanes;
   timing["cfiu"]["cycles_per_sample"] = t.cfiu_cycles_per_sample;
   timing["cfiu"]["latency_cycles"] = t.cfiu_latency_cycles;
   timing["cfiu"]["fifo_slots"] = t.cfiu_fifo_slots;

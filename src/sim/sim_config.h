@@ -19,16 +19,6 @@
 
 namespace edrnr::sim {
 
-// A traversal unit (CTU, FTU): each LFAU iteration (selection plus one bitmap
-// check) takes cycles_per_iteration cycles, and the ray positions it computes
-// (cell exits, candidate tests) are shared by position_evals_per_cycle
-// position units.
-struct TraversalTiming {
-  int cycles_per_iteration = 1;
-  int position_evals_per_cycle = 4;
-  bool operator==(const TraversalTiming&) const = default;
-};
-
 struct SimTiming {
   // Front end (ZORG, ABT, TSPS): an RP takes max(zorg_cycles_per_rp,
   // ceil(TSPS position evaluations / tsps_position_evals_per_cycle)) cycles;
@@ -36,8 +26,14 @@ struct SimTiming {
   int zorg_cycles_per_rp = 1;
   int tsps_position_evals_per_cycle = 24;
   int front_end_latency_cycles = 6;
-  TraversalTiming ctu;
-  TraversalTiming ftu;
+  // CTU and FTU: an LFAU iteration (ray selection, one bitmap check, the
+  // exits of the selected rays) takes cycles_per_iteration cycles.
+  int ctu_cycles_per_iteration = 1;
+  int ftu_cycles_per_iteration = 1;
+  // FTU inside an occupied fine voxel: every leaf visited and every candidate
+  // of an occupied leaf tested against its micro bit takes one cycle of one of
+  // ftu_lanes lanes.
+  int ftu_lanes = 4;
   // CFIU: cycles_per_sample per sample plus one per bank conflict; its result
   // reaches the TME latency_cycles later through a queue of latency + slots.
   int cfiu_cycles_per_sample = 1;

@@ -44,9 +44,9 @@ struct SampleToken {
   bool last = false;   // last sample of its batch
 };
 
-// An RP's batch from its issue by the OoO-SI until its last sample leaves the
-// VRU. The arithmetic job (weighted sums, MLP, compositing) reads coords and
-// rays and writes stay; it may run on the worker thread in between.
+// An RP's batch from the FTU until its last sample leaves the VRU. The
+// arithmetic job (weighted sums, MLP, compositing) reads block, cv_tag, coords
+// and rays and writes stay; it may run on the worker thread in between.
 struct Flight {
   uint32_t slot = 0;   // computation-SRAM slot of the batch (freed when the CFIU has read it)
   uint32_t block = 0;  // feature block (its line stays reserved until then)
@@ -104,7 +104,9 @@ class BatchArithmetic {
   std::vector<int32_t> feature_;
 };
 
-// Runs BatchArithmetic jobs in order on a second thread.
+// Runs BatchArithmetic jobs in order on a second thread. Each side spins
+// briefly before it sleeps, and wakes the other only when that one sleeps, so
+// that a job costs no system call while both are busy.
 class Worker {
  public:
   Worker(BatchArithmetic& arithmetic, RpBuffer& buffer, std::vector<Flight>& flights, size_t capacity)
@@ -118,32 +120,47 @@ class Worker {
     thread_.join();
   }
 
-  // Queues the job of RP `rp`; returns its sequence number.
+  // Queues the job of RP `rp` (at most `capacity` jobs outstanding); returns
+  // its sequence number.
   uint64_t submit(uint32_t rp) {
-    const uint64_t seq = submitted_.load(std::memory_order_relaxed);
+    const uint64_t seq = submitted_.load();
     queue_[seq % queue_.size()] = rp;
-    submitted_.store(seq + 1, std::memory_order_release);
-    submitted_.notify_one();
+    submitted_.store(seq + 1);
+    if (worker_sleeping_.load()) submitted_.notify_one();
     return seq;
   }
   // Waits until job `seq` is done (its results are then visible).
   void wait(uint64_t seq) {
-    for (uint64_t done = completed_.load(std::memory_order_acquire); done <= seq;
-         done = completed_.load(std::memory_order_acquire))
-      completed_.wait(done, std::memory_order_acquire);
+    if (!spin_until([&] { return completed_.load() > seq; })) {
+      main_sleeping_.store(true);
+      for (uint64_t done = completed_.load(); done <= seq; done = completed_.load()) completed_.wait(done);
+      main_sleeping_.store(false);
+    }
     if (error_) std::rethrow_exception(error_);
   }
 
  private:
+  template <class Ready>
+  static bool spin_until(Ready ready) {
+    for (int i = 0; i < 256; ++i) {
+      if (ready()) return true;
+#if defined(__x86_64__) || defined(__i386__)
+      __builtin_ia32_pause();
+#endif
+    }
+    return ready();
+  }
+
   void loop() {
     uint64_t next = 0;
     for (;;) {
-      uint64_t avail = submitted_.load(std::memory_order_acquire);
-      while (avail == next && !stop_.load()) {
-        submitted_.wait(avail, std::memory_order_acquire);
-        avail = submitted_.load(std::memory_order_acquire);
+      if (!spin_until([&] { return submitted_.load() != next; })) {
+        worker_sleeping_.store(true);
+        for (uint64_t avail = submitted_.load(); avail == next; avail = submitted_.load()) submitted_.wait(avail);
+        worker_sleeping_.store(false);
       }
       if (stop_.load()) return;
+      const uint64_t avail = submitted_.load();
       for (; next < avail; ++next) {
         const uint32_t rp = queue_[next % queue_.size()];
         try {
@@ -151,8 +168,8 @@ class Worker {
         } catch (...) {
           error_ = std::current_exception();
         }
-        completed_.store(next + 1, std::memory_order_release);
-        completed_.notify_one();
+        completed_.store(next + 1);
+        if (main_sleeping_.load()) completed_.notify_one();
       }
     }
   }
@@ -162,7 +179,7 @@ class Worker {
   std::vector<Flight>& flights_;
   std::vector<uint32_t> queue_;
   std::atomic<uint64_t> submitted_{0}, completed_{0};
-  std::atomic<bool> stop_{false};
+  std::atomic<bool> stop_{false}, worker_sleeping_{false}, main_sleeping_{false};
   std::exception_ptr error_;
   std::thread thread_;
 };
@@ -372,9 +389,7 @@ class Engine {
         const CtuCounters before = ctu_.counters();
         ctu_s_.result = ctu_.run(buffer_[rp]);
         const CtuCounters& after = ctu_.counters();
-        const uint64_t cycles =
-            (after.iterations - before.iterations) * uint64_t(t_.ctu.cycles_per_iteration) +
-            ceil_div(after.position_evals - before.position_evals, uint64_t(t_.ctu.position_evals_per_cycle));
+        const uint64_t cycles = (after.iterations - before.iterations) * uint64_t(t_.ctu_cycles_per_iteration);
         ctu_s_.rp = rp;
         ctu_s_.end = c + std::max<uint64_t>(1, cycles);
         ctu_s_.holding = true;
@@ -406,6 +421,7 @@ class Engine {
             if (a == CacheAccess::MissAllocated)
               mem_.read(DataType::Features, map_.feature_block(block), uint32_t(map_.feature_block_bytes), block, c);
             ooo_.push({s.rp, block, s.slot});
+            start_batch(s.rp, s.slot);
             s.holding = false;
           }
         }
@@ -426,9 +442,10 @@ class Engine {
         const FtuCounters before = ftu_.counters();
         s.has_batch = ftu_.run(buffer_[sched->rp], sched->rp, sched->tag, batches_[s.slot]);
         const FtuCounters& after = ftu_.counters();
-        const uint64_t cycles =
-            (after.iterations - before.iterations) * uint64_t(t_.ftu.cycles_per_iteration) +
-            ceil_div(after.position_evals - before.position_evals, uint64_t(t_.ftu.position_evals_per_cycle));
+        const uint64_t lane_cycles =
+            after.leaf_checks - before.leaf_checks + after.candidate_tests - before.candidate_tests;
+        const uint64_t cycles = (after.iterations - before.iterations) * uint64_t(t_.ftu_cycles_per_iteration) +
+                                ceil_div(lane_cycles, uint64_t(t_.ftu_lanes));
         s.end = c + std::max<uint64_t>(1, cycles);
         s.reads.clear();
         for (uint32_t f : micro_log_) s.reads.push_back(map_.micro_word(uint32_t(model_.fine_to_block[f])));
@@ -487,28 +504,38 @@ class Engine {
     set_state(kOooSi, st);
   }
 
-  void issue(const LsEntry& e) {
-    const SampleBatch& batch = batches_[e.data_base];
-    Flight& f = flights_[e.rp];
-    f.slot = e.data_base;
-    f.block = e.block;
+  // The batch's arithmetic starts as soon as it exists: it depends only on
+  // the samples, the model and its RP's rays, and the RP has no other batch
+  // in flight. The sample coordinates are computed here, for the CFIU's bank
+  // reads at issue.
+  void start_batch(uint32_t rp, uint32_t slot) {
+    const SampleBatch& batch = batches_[slot];
+    Flight& f = flights_[rp];
+    f.slot = slot;
+    f.block = uint32_t(batch.block);
     f.cv_tag = batch.cv_tag;
-    f.sample_cycles.clear();
     f.coords.clear();
     f.rays.clear();
-    const RayPacket& p = buffer_[e.rp];
+    const RayPacket& p = buffer_[rp];
     for (const SampleRef& sref : batch.samples) {
-      const SampleCoord sc =
-          sample_coordinate(math_, p.rays[sref.ray].ray, sref.k, n_.interp_fraction_bits, n_.rounding);
-      const int conflicts = cfiu_.read_corners(e.block, sc);
-      f.sample_cycles.push_back(uint8_t(std::min(255, t_.cfiu_cycles_per_sample + conflicts)));
-      f.coords.push_back(sc);
+      f.coords.push_back(sample_coordinate(math_, p.rays[sref.ray].ray, sref.k, n_.interp_fraction_bits, n_.rounding));
       f.rays.push_back(sref.ray);
     }
     if (worker_)
-      f.job = worker_->submit(e.rp);
+      f.job = worker_->submit(rp);
     else
-      arithmetic_.run(buffer_[e.rp], f);
+      arithmetic_.run(buffer_[rp], f);
+  }
+
+  // The CFIU reads the corners of each sample from the banks now; bank
+  // conflicts lengthen its samples.
+  void issue(const LsEntry& e) {
+    Flight& f = flights_[e.rp];
+    f.sample_cycles.clear();
+    for (const SampleCoord& sc : f.coords) {
+      const int conflicts = cfiu_.read_corners(e.block, sc);
+      f.sample_cycles.push_back(uint8_t(std::min(255, t_.cfiu_cycles_per_sample + conflicts)));
+    }
     cfiu_s_ = {true, e.rp, 0, f.sample_cycles[0], cycle_ + 1};
   }
 

@@ -17,13 +17,14 @@
 // clock; the feature cache is the CFIU's own (chip/feature_cache.h), with its
 // fills coming from the DDR3 model.
 //
-// The work on a batch of samples (interpolation, MLP, compositing) is done
-// when the OoO-SI issues it, and its outcome (reschedule or retire) takes
-// effect when its last sample leaves the VRU. Every RP has at most one batch
-// in flight and each unit's result depends only on the RP's own state, so the
-// image is bit-identical to render_chip()'s for any timing (a test checks it).
-// With threads = 2 the batch arithmetic runs on a second thread, ahead of the
-// timing model; the image and every statistic stay the same.
+// The arithmetic of a batch of samples (interpolation sums, MLP, compositing)
+// is done when the FTU hands the batch to the OoO-SI, the bank reads when the
+// OoO-SI issues it, and its outcome (reschedule or retire) takes effect when
+// its last sample leaves the VRU. Every RP has at most one batch in flight and
+// each unit's result depends only on the RP's own state, so the image is
+// bit-identical to render_chip()'s for any timing (a test checks it). With
+// threads = 2 the batch arithmetic runs on a second thread while the timing
+// model goes on; the image and every statistic stay the same.
 #include <cstdint>
 #include <functional>
 #include <memory>

@@ -94,8 +94,8 @@ TEST(Simulator, SwitchesAndTinyBuffersKeepTheImage) {
     c.timing.tme_macs_per_cycle = 100;
     c.timing.cfiu_cycles_per_sample = 3;
     c.timing.vru_cycles_per_sample = 2;
-    c.timing.ctu.cycles_per_iteration = 5;
-    c.timing.ftu.position_evals_per_cycle = 1;
+    c.timing.ctu_cycles_per_iteration = 5;
+    c.timing.ftu_lanes = 1;
     c.clock_MHz = 2000;
   });
   for (const auto& [name, cfg] : variants) {
