@@ -250,6 +250,7 @@ class Engine {
         mlp_cache_(cache_config(config.memory.mlp_cache, "mlp_weights", config.chip.mlp_cache_bytes,
                                 config.hit_rate_window_cycles)),
         feature_series_(config.hit_rate_window_cycles),
+        mlp_series_(config.hit_rate_window_cycles),
         activity_(std::vector<std::string>(kUnitNames, kUnitNames + kUnits), options.trace_start_cycle,
                   options.trace_cycles, options.trace_max_events),
         rp_capacity_(size_t(config.chip.rp_buffer_capacity)),
@@ -591,10 +592,17 @@ class Engine {
         s.waiting.clear();
         const uint32_t mlp = uint32_t(model_.coarse_to_mlp[tag]);
         s.lines.clear();
-        for (uint64_t i = 0; i < mlp_lines_; ++i)
+        bool on_chip = true;
+        for (uint64_t i = 0; i < mlp_lines_; ++i) {
           s.lines.push_back(map_.mlp(mlp) + i * cfg_.memory.mlp_cache.line_bytes);
+          on_chip = on_chip && mlp_cache_.lookup(s.lines.back());
+        }
+        mlp_series_.record(c, on_chip);
+        s.switched = true;
         ++mlp_switches_;
       } else {
+        if (next.first && !s.switched) mlp_series_.record(c, true);  // its MLP is in the MAC array
+        s.switched = false;
         s.token = tme_in_.pop(c);
         s.holding = true;
         s.left = tme_cycles_per_sample_;
@@ -847,7 +855,9 @@ class Engine {
     uint64_t fhits = 0, faccesses = 0;
     for (const HitRateWindow& w : feature_series_.series()) fhits += w.hits, faccesses += w.accesses;
     s.feature_hit_rate = ratio(double(fhits), double(faccesses));
-    s.mlp_hit_rate = mlp_cache_.stats().hit_rate();
+    uint64_t mhits = 0, maccesses = 0;
+    for (const HitRateWindow& w : mlp_series_.series()) mhits += w.hits, maccesses += w.accesses;
+    s.mlp_hit_rate = ratio(double(mhits), double(maccesses));
     s.dram_read_bytes = uint64_t(stats_.get("dram.read_bytes"));
     s.dram_write_bytes = uint64_t(stats_.get("dram.write_bytes"));
     s.coarse_rays_per_iteration = cc.coarse_rays_per_iteration();
@@ -903,6 +913,9 @@ class Engine {
     cnt("cache.features.misses_merged", "requests", "misses merged by the MSHR", fc.merged_misses);
     cnt("cache.features.stall_cycles", "cycles", "requests refused: no MSHR entry or no unreserved line", fc.stalls);
     cnt("cache.features.evictions", "lines", "lines evicted", fc.evictions);
+    cnt("cache.mlp.batches", "batches", "batches reaching the TME", maccesses);
+    cnt("cache.mlp.batch_hits", "batches", "batches whose MLP was on chip (in the MAC array or the MLP cache)", mhits);
+    val("cache.mlp.hit_rate", "ratio", "batch_hits / batches (the MLP hit rate of the report)", s.mlp_hit_rate);
     cnt("cache.features.bank_reads", "reads", "vertex vectors read from the 8 banks", cc.cfiu.corner_reads);
     cnt("cache.features.bank_conflict_cycles", "cycles", "extra CFIU cycles from two corners in one bank",
         cc.cfiu.conflict_cycles);
@@ -911,7 +924,8 @@ class Engine {
     res_.hit_rate_series = {
         {"micro_grid", hit_rate_series_json(micro_cache_.hit_rate_series(), cfg_.hit_rate_window_cycles)},
         {"features", hit_rate_series_json(feature_series_.series(), cfg_.hit_rate_window_cycles)},
-        {"mlp_weights", hit_rate_series_json(mlp_cache_.hit_rate_series(), cfg_.hit_rate_window_cycles)}};
+        {"mlp_weights", hit_rate_series_json(mlp_series_.series(), cfg_.hit_rate_window_cycles)},
+        {"mlp_weight_lines", hit_rate_series_json(mlp_cache_.hit_rate_series(), cfg_.hit_rate_window_cycles)}};
     if (opt_.trace_cycles > 0) res_.trace = activity_.chrome_trace(cfg_.clock_MHz);
     res_.energy_run = energy_run(cc);
     if (!cfg_.energy.events_csv.empty()) {
@@ -960,6 +974,7 @@ class Engine {
     bool loaded = false;
     uint32_t loaded_tag = 0;
     bool switching = false;
+    bool switched = false;  // the token at the head of the queue caused the last switch
     uint32_t switch_tag = 0;
     uint64_t switch_end = 0;
     std::vector<uint64_t> lines;
@@ -997,7 +1012,8 @@ class Engine {
   MemorySystem mem_;
   Cache micro_cache_;
   Cache mlp_cache_;
-  HitSeries feature_series_;
+  HitSeries feature_series_;  // per batch request
+  HitSeries mlp_series_;      // per batch at the TME: its MLP on chip (MAC array or MLP cache)
   ActivityRecorder activity_;
   size_t rp_capacity_;
   Fifo<uint32_t> fe_out_, retire_q_;

@@ -74,10 +74,10 @@ struct SimSummary {
   uint64_t samples = 0;  // samples interpolated
   double samples_per_cycle = 0;
   double peak_samples_per_cycle = 0;  // what the slowest of CFIU, TME and VRU allows
-  double micro_grid_hit_rate = 0;
-  double feature_hit_rate = 0;
-  double mlp_hit_rate = 0;
-  uint64_t dram_read_bytes = 0;  // bursts moved, as the DRAM counts them
+  double micro_grid_hit_rate = 0;     // micro-grid word reads that hit
+  double feature_hit_rate = 0;        // feature block requests (one per batch) that hit
+  double mlp_hit_rate = 0;            // batches at the TME whose MLP was on chip (MAC array or MLP cache)
+  uint64_t dram_read_bytes = 0;       // bursts moved, as the DRAM counts them
   uint64_t dram_write_bytes = 0;
   double coarse_rays_per_iteration = 0;
   double fine_rays_per_iteration = 0;
@@ -89,11 +89,14 @@ struct SimResult {
   ChipCounters chip;  // the units' own counters, as render_chip() reports them
   SimSummary summary;
   std::unique_ptr<StatsRegistry> stats;  // every statistic, in registration order
-  nlohmann::json hit_rate_series;        // {"micro_grid": ..., "features": ..., "mlp_weights": ...}
-  nlohmann::json trace;                  // Chrome trace (null when not asked for)
-  EnergyRun energy_run;                  // event counts, to evaluate at any operating point
-  std::optional<EnergyReport> energy;    // at the configured clock's operating point
-  bool voltage_extrapolated = false;     // the clock is above every operating point
+  // Hit rate per window of cycles (Fig. 8): {"micro_grid", "features",
+  // "mlp_weights" (per batch, as mlp_hit_rate), "mlp_weight_lines" (per line
+  // access of the MLP cache)}, each as hit_rate_series_json() writes it.
+  nlohmann::json hit_rate_series;
+  nlohmann::json trace;                // Chrome trace (null when not asked for)
+  EnergyRun energy_run;                // event counts, to evaluate at any operating point
+  std::optional<EnergyReport> energy;  // at the configured clock's operating point
+  bool voltage_extrapolated = false;   // the clock is above every operating point
 };
 
 // Simulates one frame. Throws Error for a bad config, camera or model (as

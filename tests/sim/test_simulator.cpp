@@ -160,6 +160,11 @@ TEST(Simulator, StatisticsObeyTheirInvariants) {
   EXPECT_EQ(s.get("mem.rp_output.write_bytes"), 16.0 * double(c.packets));
 
   // Hits and misses add up, per cache.
+  EXPECT_EQ(s.get("cache.mlp.batches"), double(c.ftu.batches));
+  // A batch misses its MLP only at a switch, and then at least one line comes from DRAM.
+  const double mlp_misses = s.get("cache.mlp.batches") - s.get("cache.mlp.batch_hits");
+  EXPECT_LE(mlp_misses, s.get("sim.mlp_switches"));
+  EXPECT_GE(s.get("cache.mlp_weights.misses"), mlp_misses);
   for (const char* cache : {"cache.micro_grid", "cache.mlp_weights", "cache.features"}) {
     const std::string p = cache;
     EXPECT_EQ(s.get(p + ".hits") + s.get(p + ".misses"), s.get(p + ".accesses")) << cache;
