@@ -12,6 +12,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
+constexpr const char* kDefaultDramPreset = "ddr3-1600-4gb-x16-16bit";
+
 template <class T>
 T scalar(const YAML::Node& v, const std::string& where, const char* expected) {
   if (!v.IsScalar()) fail("{}: expected {}", where, expected);
@@ -277,6 +279,18 @@ SimConfig sim_config_from_yaml(const YAML::Node& node, std::string_view where_vi
                                     c.hit_rate_window_cycles = count(x, a);
                                   });
                  });
+  }
+  // Defaults for what the preset leaves out: the DRAM part and the energy
+  // tables of configs/edr_nr_40nm.yaml, looked up beside the preset.
+  if (c.memory.dram.rows == 0)
+    read_dram(YAML::Node(std::string(kDefaultDramPreset)), where + ".simulator.memory.dram (default)", base_dir,
+              dram_search_dirs, c.memory);
+  if (!base_dir.empty()) {
+    const bool has_energy = s && s["energy"];
+    const fs::path events = base_dir / ".." / "energy" / "events.csv",
+                   leakage = base_dir / ".." / "energy" / "leakage.csv";
+    if (!has_energy && fs::is_regular_file(events)) c.energy.events_csv = events.lexically_normal();
+    if (!has_energy && fs::is_regular_file(leakage)) c.energy.leakage_csv = leakage.lexically_normal();
   }
   try {
     validate(c);

@@ -101,9 +101,13 @@ struct SimConfig {
 void validate(const SimConfig& config);
 
 // Reads a chip preset. The `simulator` section's DRAM (a preset name looked up
-// in dram_search_dirs, a path, or a map in the configs/dram schema) and energy
-// table paths are resolved relative to base_dir. Missing keys keep their
-// defaults; an unknown key or a bad value throws Error naming `where` and the key.
+// in <base_dir>/../dram and dram_search_dirs, a path, or a map in the
+// configs/dram schema) and energy table paths are resolved relative to
+// base_dir. Missing keys keep their defaults, which are the values of
+// configs/chip/edr_nr_40nm.yaml: without a `simulator.memory.dram` the
+// DDR3-1600 x16 16-bit preset is looked up, without `simulator.energy` the
+// tables <base_dir>/../energy/{events,leakage}.csv are used if they exist. An
+// unknown key or a bad value throws Error naming `where` and the key.
 SimConfig sim_config_from_yaml(const YAML::Node& node, std::string_view where, const std::filesystem::path& base_dir,
                                const std::vector<std::filesystem::path>& dram_search_dirs);
 // Loads a preset file; DRAM presets are looked for beside the chip presets

@@ -303,7 +303,21 @@ TEST(SimConfig, ErrorsNameTheKey) {
   expect_error(dram + "timing: {vru: {cycles_per_sample: 0}}}", "vru.cycles_per_sample");
   expect_error(dram + "energy: {dram: both}}", "'both' is not events or model");
   expect_error("simulator: {memory: {dram: no-such-part}}", "no-such-part");
-  expect_error("simulator: {clock_MHz: 100}", "no DRAM configured");
+  expect_error("simulator: {memory: {dram: {name: x}}}", "test.yaml.simulator.memory.dram");
+}
+
+TEST(SimConfig, AFunctionalPresetSimulatesWithThePapersDefaults) {
+  const SimConfig d = load_sim_config(std::filesystem::path(EDRNR_SOURCE_DIR) / "configs/chip/default.yaml");
+  const SimConfig& p = preset();
+  EXPECT_EQ(d.timing, p.timing);
+  EXPECT_EQ(d.clock_MHz, p.clock_MHz);
+  EXPECT_EQ(d.memory.dram.name, p.memory.dram.name);
+  EXPECT_EQ(d.memory.micro_grid_cache, p.memory.micro_grid_cache);
+  EXPECT_EQ(d.memory.mlp_cache, p.memory.mlp_cache);
+  EXPECT_EQ(d.energy.events_csv, p.energy.events_csv);
+  EXPECT_EQ(d.energy.leakage_csv, p.energy.leakage_csv);
+  EXPECT_EQ(d.operating_points.size(), p.operating_points.size());
+  EXPECT_EQ(d.chip.rp_buffer_capacity, p.chip.rp_buffer_capacity);
 }
 
 TEST(SimConfig, VoltageComesFromTheNextOperatingPointUp) {
