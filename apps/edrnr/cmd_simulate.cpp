@@ -35,7 +35,7 @@ struct SimulateOptions {
   std::string model, chip = "edr_nr_40nm", dataset, split = "test", disable, output, trace_window = "0:50000";
   int view = 0, width = 0, height = 0, threads = 1;
   double orbit = 30, elevation = 30, radius = 4, fov = 40, clock = 0;
-  bool all_points = false, quiet = false;
+  bool all_points = false, quiet = false, table = false;
   CLI::Option *view_opt, *orbit_opt, *width_opt, *height_opt, *clock_opt, *elev_opt, *radius_opt, *fov_opt;
 };
 
@@ -254,6 +254,7 @@ void run_simulate(const SimulateOptions& o) {
   std::cout << sim::format_sim_report(r);
   if (gt_psnr) fmt::print("quality     PSNR against the ground truth (view {}): {:.2f} dB\n", o.view, *gt_psnr);
   std::cout << points_table;
+  if (o.table) r.stats->print_table(std::cout);
   if (!o.output.empty())
     fmt::print("wrote       {0}/image.png, {0}/stats.json, {0}/config.yaml{1}\n", o.output,
                r.trace.is_null() ? "" : fmt::format(", {}/trace.json (cycles {})", o.output, o.trace_window));
@@ -281,6 +282,7 @@ void register_simulate_cmd(CLI::App& app) {
   cmd->add_option("--trace-window", o->trace_window, "cycles of the Chrome trace, START:CYCLES")->capture_default_str();
   cmd->add_option("--threads", o->threads, "1, or 2: the batch arithmetic on a second thread")->capture_default_str();
   cmd->add_flag("--all-points", o->all_points, "also simulate at each of Table I's five operating points");
+  cmd->add_flag("--table", o->table, "also print every statistic (name, value, unit, description)");
   cmd->add_flag("-q,--quiet", o->quiet, "no progress line");
   cmd->callback([o] { run_simulate(*o); });
 }
