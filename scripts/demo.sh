@@ -1,18 +1,34 @@
 #!/usr/bin/env bash
-# The main job: installs what is missing, builds, and renders the bundled
-# default model, printing what it did. Output goes to ./demo-out/.
+# The main job: installs what is missing, builds, and simulates one 800x800
+# frame of the bundled model on the EDR-NR chip, cycle by cycle. It prints the
+# report (FPS, nJ/pixel, power, cache hit rates, external traffic, and PSNR
+# against the ground truth when the dataset is at hand) and writes the image,
+# statistics JSON, resolved config and a Chrome trace to ./demo-out/.
+#
+# Overrides: MODEL=file.edrnr  DATASET=nerf_synthetic/<scene>  VIEW=N  OUT=dir
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/setup.sh
 ./scripts/build.sh
 OUT=${OUT:-demo-out}
 mkdir -p "$OUT"
-MODEL=assets/default.edrnr
+
+MODEL=${MODEL:-assets/default.edrnr}
+DATASET=${DATASET:-../shared/data/nerf_synthetic/lego}
 if [ ! -f "$MODEL" ]; then
-  echo "demo: no bundled model yet; building the procedural 'several objects' scene"
+  echo "demo: no bundled model at $MODEL; using the procedural 'several objects' scene"
   MODEL="$OUT/scene.edrnr"
   ./build/edrnr make-scene several --quantized-only -o "$MODEL"
+  DATASET=""
 fi
+
+echo
 ./build/edrnr inspect "$MODEL"
-./build/edrnr render "$MODEL" --orbit 30 --width 400 --height 400 -o "$OUT/view.png"
-echo "demo: image written to $OUT/view.png"
+echo
+if [ -n "$DATASET" ] && [ -f "$DATASET/transforms_test.json" ]; then
+  ./build/edrnr simulate "$MODEL" --dataset "$DATASET" --view "${VIEW:-0}" --threads 2 -o "$OUT"
+else
+  ./build/edrnr simulate "$MODEL" --orbit 30 --width 800 --threads 2 -o "$OUT"
+fi
+echo
+echo "demo: image, stats.json, config.yaml and trace.json (open in ui.perfetto.dev) are in $OUT/"
