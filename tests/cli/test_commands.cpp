@@ -84,6 +84,30 @@ TEST_F(Commands, EvalScoresTheModelThatMadeTheDataset) {
   EXPECT_LT(j["mean_psnr_db"].get<double>(), 30.0) << r.out;
 }
 
+// `simulate` writes its four outputs; switching a scheduling technique off
+// changes the timing, never the image.
+TEST_F(Commands, SimulateWritesItsOutputsAndTechniquesChangeOnlyTiming) {
+  const std::string model = (dir_ / "s.edrnr").string();
+  ASSERT_EQ(run("make-scene several --res 32 --quantized-only -o " + model).exit_code, 0);
+  const fs::path a = dir_ / "a", b = dir_ / "b";
+  RunResult r = run("simulate " + model + " --width 24 -q -o " + a.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("FPS"), std::string::npos) << r.out;
+  for (const char* f : {"image.png", "stats.json", "config.yaml", "trace.json"}) EXPECT_TRUE(fs::exists(a / f)) << f;
+  r = run("simulate " + model + " --width 24 -q --disable reorder,zorder -o " + b.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(read_file_text(a / "image.png"), read_file_text(b / "image.png"));
+  auto ja = nlohmann::json::parse(read_file_text(a / "stats.json"));
+  auto jb = nlohmann::json::parse(read_file_text(b / "stats.json"));
+  EXPECT_EQ(ja["energy"]["pixels"].get<int>(), 24 * 24);
+  EXPECT_GT(ja["energy"]["cycles"].get<double>(), 0.0);
+  EXPECT_NE(ja["energy"]["cycles"], jb["energy"]["cycles"]);
+
+  r = run("simulate " + model + " --width 24 -q --disable bogus -o " + a.string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("bogus"), std::string::npos) << r.err;
+}
+
 TEST_F(Commands, BadInputGetsAClearErrorAndNonZeroExit) {
   const std::string model = (dir_ / "s.edrnr").string();
   ASSERT_EQ(run("make-scene sphere --res 32 --quantized-only -o " + model).exit_code, 0);
