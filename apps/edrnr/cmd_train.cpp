@@ -18,6 +18,7 @@
 #include "data/dataset.h"
 #include "model/model_io.h"
 #include "render/reference.h"
+#include "train/images.h"
 #include "train/trainer.h"
 
 namespace edrnr::cli {
@@ -108,7 +109,9 @@ void run_train(const TrainCmdOptions& o) {
   d.downscale = cfg.downscale;
   for (int c = 0; c < 3; ++c) d.background[c] = cfg.background[c];
   say(fmt::format("loading {} ({} split, downscale {})", o.dataset, cfg.split, cfg.downscale));
-  const Dataset data = load_dataset(o.dataset, d);
+  d.load_images = !cfg.random_background;
+  Dataset data = load_dataset(o.dataset, d);
+  if (cfg.random_background) train::load_premultiplied_rgba(data, cfg.downscale);
 
   std::unique_ptr<train::Trainer> trainer =
       resuming ? std::make_unique<train::Trainer>(data, ckpt, o.resume) : std::make_unique<train::Trainer>(data, cfg);

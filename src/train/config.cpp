@@ -126,6 +126,7 @@ const std::map<std::string, Field>& fields() {
         [](const TrainConfig& c) {
           return fmt::format("[{}, {}, {}]", c.background[0], c.background[1], c.background[2]);
         }}},
+      {"random_background", scalar(&TrainConfig::random_background)},
       {"iters", scalar(&TrainConfig::iters)},
       {"minutes", scalar(&TrainConfig::minutes)},
       {"per_cv_fraction", scalar(&TrainConfig::per_cv_fraction)},

@@ -9,7 +9,8 @@ OccupancyGrid::OccupancyGrid(int micro_res)
     : res(micro_res),
       density(size_t(micro_res) * micro_res * micro_res, -1.f),
       micro(micro_res),
-      macro(micro_res / kMacroCell) {
+      macro(micro_res / kMacroCell),
+      fine(micro_res / 4) {
   rebuild(0.f);
 }
 
@@ -51,6 +52,7 @@ void OccupancyGrid::rebuild(float threshold) {
 
 void OccupancyGrid::rebuild_macro() {
   macro = Bitmap3(res / kMacroCell);
+  fine = Bitmap3(res / 4);
   const auto& words = micro.words();
   // A word holds 64 consecutive x of one row (res is a multiple of 32, so a
   // word may hold two rows when res == 32).
@@ -61,6 +63,7 @@ void OccupancyGrid::rebuild_macro() {
       w &= w - 1;
       const int x = int(i % size_t(res)), y = int((i / size_t(res)) % size_t(res)), z = int(i / (size_t(res) * res));
       macro.set(x / kMacroCell, y / kMacroCell, z / kMacroCell);
+      fine.set(x / 4, y / 4, z / 4);
     }
   }
 }

@@ -20,6 +20,7 @@ struct OccupancyGrid {
   std::vector<float> density;  // running max of sigma per micro voxel; < 0: not evaluated yet
   Bitmap3 micro;               // occupancy, res^3
   Bitmap3 macro;               // OR of kMacroCell^3 micro voxels
+  Bitmap3 fine;                // OR of 4^3 micro voxels (the fine tier)
   bool aabb_known = false;
   Vec3i aabb_lo{0, 0, 0}, aabb_hi{0, 0, 0};  // inclusive micro voxel bounds of the object AABB
 
@@ -27,6 +28,7 @@ struct OccupancyGrid {
 
   bool occupied(int x, int y, int z) const { return micro.get(x, y, z); }
   bool macro_occupied(int x, int y, int z) const { return macro.get(x / kMacroCell, y / kMacroCell, z / kMacroCell); }
+  bool fine_occupied(int x, int y, int z) const { return fine.get(x / 4, y / 4, z / 4); }
   // Micro voxels in sweep part p, in linear (x fastest) order.
   static bool in_part(int x, int y, int z, int part) { return ((x & 1) | ((y & 1) << 1) | ((z & 1) << 2)) == part; }
 
@@ -35,7 +37,7 @@ struct OccupancyGrid {
   // Rebuilds micro and macro bitmaps: occupied iff not yet evaluated or
   // density > threshold, and inside the AABB when it is known.
   void rebuild(float threshold);
-  // Rebuilds the macro bitmap from the micro bitmap.
+  // Rebuilds the macro and fine bitmaps from the micro bitmap.
   void rebuild_macro();
   // Recomputes the AABB from the occupancy (density > threshold or not yet
   // evaluated, ignoring the current AABB) filtered by a Gaussian of

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 
@@ -19,8 +20,8 @@ void write_synthetic_dataset(const SceneModel& model, const std::filesystem::pat
   const double kPi = 3.14159265358979323846;
   const double golden = kPi * (3.0 - std::sqrt(5.0));
   const int total = views.train_views + views.test_views;
-  RenderSettings rs;
-  for (int c = 0; c < 3; ++c) rs.background[c] = views.background[c];
+  RenderSettings on_white, on_black;
+  for (int c = 0; c < 3; ++c) on_black.background[c] = 0.f;
   nlohmann::json split_json[2];
   for (auto& j : split_json) {
     j["camera_angle_x"] = views.fov_x_deg * kPi / 180.0;
@@ -37,7 +38,20 @@ void write_synthetic_dataset(const SceneModel& model, const std::filesystem::pat
     const double elevation = -60.0 + 135.0 * u;
     const double azimuth = std::fmod(v * golden * 180.0 / kPi, 360.0);
     const Camera cam = orbit_camera(views.width, views.height, azimuth, elevation, views.radius, views.fov_x_deg);
-    const Image img = render_reference(model, cam, rs);
+    const Image white = render_reference(model, cam, on_white);
+    Image img = white;
+    if (views.alpha) {
+      // pixel = rgb a + (1 - a) bg, so 1 - a = white - black, the same in every channel.
+      const Image black = render_reference(model, cam, on_black);
+      img = Image(white.width, white.height, 4);
+      for (size_t p = 0; p < size_t(white.width) * white.height; ++p) {
+        float t = 0.f;
+        for (int c = 0; c < 3; ++c) t += white.data[3 * p + size_t(c)] - black.data[3 * p + size_t(c)];
+        const float a = std::clamp(1.f - t / 3.f, 0.f, 1.f);
+        for (int c = 0; c < 3; ++c) img.data[4 * p + size_t(c)] = a > 0.f ? std::min(1.f, black.data[3 * p + size_t(c)] / a) : 0.f;
+        img.data[4 * p + 3] = a;
+      }
+    }
     const std::string name = fmt::format("{}/r_{}", s ? "test" : "train", counts[s]);
     std::filesystem::create_directories(dir / (s ? "test" : "train"));
     write_png(dir / (name + ".png"), img);

@@ -15,11 +15,12 @@ struct SyntheticViews {
   int width = 64, height = 64;
   double radius = 4.0;      // camera distance from the origin, scene units
   double fov_x_deg = 40.0;  // full horizontal field of view
-  float background[3] = {1.f, 1.f, 1.f};
+  bool alpha = true;  // RGBA images (rendered on black and on white to recover alpha); false: RGB on white
 };
 
 // Renders the views (orbit cameras spread over the sphere by a golden-angle
-// spiral; test views interleaved with the training ones) and writes
+// spiral; test views interleaved with the training ones) with the model's own
+// form (render_reference, ModelForm::Auto) and writes
 // dir/transforms_train.json, dir/transforms_test.json and dir/{train,test}/r_<i>.png.
 void write_synthetic_dataset(const SceneModel& model, const std::filesystem::path& dir, const SyntheticViews& views);
 

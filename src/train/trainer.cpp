@@ -86,6 +86,7 @@ struct Batch {
   int n_rays = 0;
   std::vector<MicroRay> mray;  // each ray in micro-grid units (the renderer's sampling)
   std::vector<float> target;   // 3 per ray
+  std::vector<float> background;  // 3 per ray
   std::vector<float> dir_enc;  // dir_dims per ray
   std::vector<int32_t> k_next, k_last;
   std::vector<float> trans;
@@ -166,6 +167,7 @@ struct Trainer::State {
   SceneModel geometry;  // scene box and micro resolution only: the renderer's sampling helpers take a model
   float delta = 0;      // scene units between candidate samples
   std::vector<uint64_t> pixel_start;  // prefix sums of pixels per frame
+  bool rgba = false;                  // images are premultiplied RGBA
 
   int64_t step = 0;
   int64_t iters = 0;
@@ -207,10 +209,13 @@ struct Trainer::State {
     delta = sample_spacing(geometry, cfg.step_micro);
     if (data.frames.empty()) fail("dataset {}: no frames to train on", data.root.string());
     pixel_start.push_back(0);
+    rgba = data.frames[0].image.channels == 4;
     for (const auto& f : data.frames) {
-      if (f.image.width <= 0 || f.image.height <= 0 || f.image.channels != 3 ||
-          f.image.data.size() != size_t(f.image.width) * f.image.height * 3)
-        fail("dataset {}: frame {} has no RGB image loaded", data.root.string(), f.image_path.string());
+      const int ch = rgba ? 4 : 3;
+      if (f.image.width <= 0 || f.image.height <= 0 || f.image.channels != ch ||
+          f.image.data.size() != size_t(f.image.width) * f.image.height * size_t(ch))
+        fail("dataset {}: frame {} has no RGB image loaded (or not the same channels as the first frame)",
+             data.root.string(), f.image_path.string());
       if (f.camera.width != f.image.width || f.camera.height != f.image.height)
         fail("dataset {}: frame {} image is {}x{} but its camera is {}x{}", data.root.string(), f.image_path.string(),
              f.image.width, f.image.height, f.camera.width, f.camera.height);
@@ -273,6 +278,7 @@ struct Trainer::State {
     b.n_rays = n;
     b.mray.resize(size_t(n));
     b.target.resize(3 * size_t(n));
+    b.background.resize(3 * size_t(n));
     b.dir_enc.resize(size_t(n) * size_t(DD));
     b.k_next.resize(size_t(n));
     b.k_last.resize(size_t(n));
@@ -297,7 +303,19 @@ struct Trainer::State {
       const int x = int(local % uint64_t(fr.image.width)), y = int(local / uint64_t(fr.image.width));
       set_ray(b, i, fr.camera.pixel_ray(x, y));
       const float* t = fr.image.at(x, y);
-      for (int c = 0; c < 3; ++c) b.target[3 * size_t(i) + size_t(c)] = t[c];
+      float* bg = &b.background[3 * size_t(i)];
+      if (rgba) {
+        // Premultiplied: target = rgb a + (1 - a) bg.
+        const uint64_t h = mix64(hash_combine(base, uint64_t(i)));
+        for (int c = 0; c < 3; ++c)
+          bg[c] = cfg.random_background ? uniform01(hash_combine(h, uint64_t(c))) : cfg.background[c];
+        for (int c = 0; c < 3; ++c) b.target[3 * size_t(i) + size_t(c)] = t[c] + (1.f - t[3]) * bg[c];
+      } else {
+        for (int c = 0; c < 3; ++c) {
+          bg[c] = cfg.background[c];
+          b.target[3 * size_t(i) + size_t(c)] = t[c];
+        }
+      }
     }
   }
 
@@ -307,12 +325,13 @@ struct Trainer::State {
   Vec3f candidate(const Batch& b, int i, int32_t k) const { return b.mray[size_t(i)].point(k); }
 
   // How many of the candidates after the one at p (in micro voxel m) surely
-  // lie in the same macro cell: one fewer than the whole steps to the cell's
-  // exit, a margin far above the rounding of the candidates' points.
-  int32_t candidates_left_in_macro(const MicroRay& r, const Vec3f& p, const Vec3i& m) const {
+  // lie in the same cell of cell^3 micro voxels: one fewer than the whole
+  // steps to the cell's exit, a margin far above the rounding of the
+  // candidates' points.
+  int32_t candidates_left_in_cell(const MicroRay& r, const Vec3f& p, const Vec3i& m, int cell) const {
     float t_exit = INFINITY;
     for (int a = 0; a < 3; ++a) {
-      const float lo = float((m[a] / kMacroCell) * kMacroCell), hi = lo + float(kMacroCell);
+      const float lo = float((m[a] / cell) * cell), hi = lo + float(cell);
       if (r.dir[a] > 0.f) t_exit = std::min(t_exit, (hi - p[a]) / r.dir[a]);
       if (r.dir[a] < 0.f) t_exit = std::min(t_exit, (lo - p[a]) / r.dir[a]);
     }
@@ -376,7 +395,11 @@ struct Trainer::State {
           Vec3i m;
           if (!micro_voxel_of(p, cfg.micro_res, m)) continue;
           if (!occ.macro_occupied(m.x, m.y, m.z)) {
-            k += candidates_left_in_macro(b.mray[size_t(i)], p, m);
+            k += candidates_left_in_cell(b.mray[size_t(i)], p, m, kMacroCell);
+            continue;
+          }
+          if (!occ.fine_occupied(m.x, m.y, m.z)) {
+            k += candidates_left_in_cell(b.mray[size_t(i)], p, m, 4);
             continue;
           }
           if (!occ.occupied(m.x, m.y, m.z)) continue;
@@ -555,7 +578,8 @@ struct Trainer::State {
           raw[size_t(j)] = b.geo[s * size_t(G)];
           for (int c = 0; c < 3; ++c) rgb[3 * size_t(j) + size_t(c)] = b.rgb[3 * s + size_t(c)];
         }
-        const CompositeResult r = composite(raw.data(), rgb.data(), cnt, delta, cfg.background);
+        const float* bg = &b.background[3 * size_t(i)];
+        const CompositeResult r = composite(raw.data(), rgb.data(), cnt, delta, bg);
         double se = 0;
         float d_pixel[3];
         for (int c = 0; c < 3; ++c) {
@@ -568,7 +592,7 @@ struct Trainer::State {
         if (!with_grad || cnt == 0) continue;
         d_raw.resize(size_t(cnt));
         d_rgb.resize(3 * size_t(cnt));
-        composite_backward(raw.data(), rgb.data(), cnt, delta, cfg.background, d_pixel, d_raw.data(), d_rgb.data());
+        composite_backward(raw.data(), rgb.data(), cnt, delta, bg, d_pixel, d_raw.data(), d_rgb.data());
         for (int j = 0; j < cnt; ++j) {
           const size_t s = size_t(b.order[size_t(first + j)]);
           b.d_raw[s] = d_raw[size_t(j)];
@@ -1194,7 +1218,10 @@ Image Trainer::render(const Camera& camera) const {
     for (int i = 0; i < cnt; ++i) {
       const int64_t p = first + i;
       s.set_ray(b, i, camera.pixel_ray(int(p % camera.width), int(p / camera.width)));
-      for (int c = 0; c < 3; ++c) b.target[3 * size_t(i) + size_t(c)] = 0.f;
+      for (int c = 0; c < 3; ++c) {
+        b.target[3 * size_t(i) + size_t(c)] = 0.f;
+        b.background[3 * size_t(i) + size_t(c)] = s.cfg.background[c];
+      }
     }
     s.forward(b);
     for (int i = 0; i < cnt; ++i) {

@@ -64,8 +64,11 @@ struct TrainStats {
 
 class Trainer {
  public:
-  // A fresh run. The dataset (images loaded) must outlive the trainer. Throws
-  // Error on an empty dataset or frames without images.
+  // A fresh run. The dataset (images loaded) must outlive the trainer. Its
+  // images are RGB composited on config.background, or premultiplied RGBA
+  // (train/images.h), all frames alike; with RGBA and random_background each
+  // training ray gets its own random background. Throws Error on an empty
+  // dataset or frames without images.
   Trainer(const Dataset& data, const TrainConfig& config);
   // Continues from checkpoint bytes written by checkpoint(); the dataset must
   // be the one the checkpoint was made from (Error otherwise).
