@@ -221,6 +221,36 @@ Int4Channel int4_channel_for_range(float lo, float hi) {
   return q;
 }
 
+Int4Channel fit_int4_channel(const float* values, size_t n, size_t stride, size_t error_stride) {
+  float lo = 0.f, hi = 0.f;
+  for (size_t v = 0; v < n; ++v) {
+    lo = std::min(lo, values[v * stride]);
+    hi = std::max(hi, values[v * stride]);
+  }
+  std::vector<float> sub;
+  for (size_t v = 0; v < n; v += error_stride) sub.push_back(values[v * stride]);
+  std::sort(sub.begin(), sub.end());
+  auto quantile = [&](double q) { return sub.empty() ? 0.f : sub[size_t(q * double(sub.size() - 1))]; };
+  // Candidates: the full range, then ranges that let the outermost tails saturate.
+  std::vector<std::pair<float, float>> ranges = {{lo, hi}};
+  for (double q : {1e-4, 1e-3, 3e-3, 1e-2, 3e-2}) ranges.emplace_back(quantile(q), quantile(1.0 - q));
+  Int4Channel best = int4_channel_for_range(lo, hi);
+  double best_err = INFINITY;
+  for (const auto& [a, b] : ranges) {
+    const Int4Channel q = int4_channel_for_range(a, b);
+    double err = 0;
+    for (float x : sub) {
+      const float e = x - q.fake(x);
+      err += double(e) * double(e);
+    }
+    if (err < best_err) {
+      best_err = err;
+      best = q;
+    }
+  }
+  return best;
+}
+
 // ---------------------------------------------------------------------------
 // BlockFeatures
 
@@ -241,14 +271,11 @@ BlockFeatures::BlockFeatures(int micro_res, int channels, std::vector<uint32_t> 
 std::vector<Int4Channel> BlockFeatures::fit_quantization() const {
   const size_t F = size_t(channels_);
   const size_t n = value_.size() / F;
-  std::vector<float> lo(F, 0.f), hi(F, 0.f);
-  for (size_t v = 0; v < n; ++v)
-    for (size_t c = 0; c < F; ++c) {
-      lo[c] = std::min(lo[c], value_[v * F + c]);
-      hi[c] = std::max(hi[c], value_[v * F + c]);
-    }
+  // Every value for the range, a subsample (at most ~64k per channel) for the error.
+  const size_t stride = std::max<size_t>(1, n / 65536);
   std::vector<Int4Channel> q(F);
-  for (size_t c = 0; c < F; ++c) q[c] = int4_channel_for_range(lo[c], hi[c]);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (size_t c = 0; c < F; ++c) q[c] = fit_int4_channel(&value_[c], n, F, stride);
   return q;
 }
 

@@ -106,6 +106,11 @@ struct Int4Channel {
 };
 // The channel's quantizer for values in [lo, hi] (the range is widened to include 0).
 Int4Channel int4_channel_for_range(float lo, float hi);
+// The quantizer with the least squared error over values[i * stride]
+// (i < n, every error_stride-th counted) among the min/max range and the
+// ranges between the q and 1 - q quantiles (q = 1e-4 .. 3e-2): outliers
+// saturate rather than coarsen every step.
+Int4Channel fit_int4_channel(const float* values, size_t n, size_t stride, size_t error_stride = 1);
 
 class BlockFeatures {
  public:
@@ -128,7 +133,7 @@ class BlockFeatures {
   void clear_quantization() { quant_.clear(); }
   bool quantized() const { return !quant_.empty(); }
   const std::vector<Int4Channel>& quantization() const { return quant_; }
-  // Per-channel quantizers from the current values' min / max.
+  // Per-channel quantizers fitted to the current values (fit_int4_channel).
   std::vector<Int4Channel> fit_quantization() const;
 
   // Features at micro position p inside micro voxel m. Returns false (and

@@ -48,7 +48,8 @@ void write_synthetic_dataset(const SceneModel& model, const std::filesystem::pat
         float t = 0.f;
         for (int c = 0; c < 3; ++c) t += white.data[3 * p + size_t(c)] - black.data[3 * p + size_t(c)];
         const float a = std::clamp(1.f - t / 3.f, 0.f, 1.f);
-        for (int c = 0; c < 3; ++c) img.data[4 * p + size_t(c)] = a > 0.f ? std::min(1.f, black.data[3 * p + size_t(c)] / a) : 0.f;
+        for (int c = 0; c < 3; ++c)
+          img.data[4 * p + size_t(c)] = a > 0.f ? std::min(1.f, black.data[3 * p + size_t(c)] / a) : 0.f;
         img.data[4 * p + 3] = a;
       }
     }

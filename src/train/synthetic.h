@@ -15,7 +15,7 @@ struct SyntheticViews {
   int width = 64, height = 64;
   double radius = 4.0;      // camera distance from the origin, scene units
   double fov_x_deg = 40.0;  // full horizontal field of view
-  bool alpha = true;  // RGBA images (rendered on black and on white to recover alpha); false: RGB on white
+  bool alpha = true;        // RGBA images (rendered on black and on white to recover alpha); false: RGB on white
 };
 
 // Renders the views (orbit cameras spread over the sphere by a golden-angle

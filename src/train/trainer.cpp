@@ -84,10 +84,10 @@ inline float sigmoid(float z) { return 1.f / (1.f + std::exp(-z)); }
 // Rays and samples of one step (reused between steps).
 struct Batch {
   int n_rays = 0;
-  std::vector<MicroRay> mray;  // each ray in micro-grid units (the renderer's sampling)
-  std::vector<float> target;   // 3 per ray
+  std::vector<MicroRay> mray;     // each ray in micro-grid units (the renderer's sampling)
+  std::vector<float> target;      // 3 per ray
   std::vector<float> background;  // 3 per ray
-  std::vector<float> dir_enc;  // dir_dims per ray
+  std::vector<float> dir_enc;     // dir_dims per ray
   std::vector<int32_t> k_next, k_last;
   std::vector<float> trans;
   std::vector<uint8_t> alive;

@@ -439,6 +439,26 @@ TEST(FeatureGrid, Int4QuantizerMatchesTheModelFormula) {
   EXPECT_EQ(p.fake(0.f), 0.f);
 }
 
+TEST(FeatureGrid, Int4FitSaturatesAnOutlierInsteadOfCoarseningEveryStep) {
+  // 100000 values evenly in [-1, 1] and one at 100. Min/max would give a step
+  // of 101 / 15 and put every ordinary value in one code (mean error 0.5);
+  // the [-1, 1] range has step 2 / 15 (mean error 1/30) and costs only the
+  // outlier's saturation, so the fit must find a range about that tight.
+  std::vector<float> v;
+  for (int i = 0; i < 100000; ++i) v.push_back(-1.f + 2.f * float(i) / 99999.f);
+  v.push_back(100.f);
+  const Int4Channel q = fit_int4_channel(v.data(), v.size(), 1);
+  EXPECT_LT(q.scale, 2.5f / 15.f);
+  double err = 0;
+  for (int i = 0; i < 100000; ++i) err += std::fabs(v[size_t(i)] - q.fake(v[size_t(i)]));
+  EXPECT_LT(err / 100000, 0.05);
+  // Without the outlier the range stays close to [-1, 1] (a sliver of each
+  // tail may saturate: with codes on the range's ends, that lowers the error).
+  v.pop_back();
+  const Int4Channel full = fit_int4_channel(v.data(), v.size(), 1);
+  EXPECT_NEAR(full.scale, 2.f / 15.f, 0.02f * 2.f / 15.f);
+}
+
 TEST(FeatureGrid, QuantizedBlockGradientIsStraightThrough) {
   std::vector<float> values(kBlockVerts * 2);
   for (size_t i = 0; i < values.size(); ++i) values[i] = rnd(41, i, -1.f, 1.f);
