@@ -262,18 +262,8 @@ void export_chip_stats(const ChipCounters& c, StatsRegistry& s, const std::strin
 // ---------------------------------------------------------------- render
 
 void check_chip_model(const SceneModel& m) {
-  if (m.micro_res <= 0 || m.micro_res % 32)
-    fail("model micro resolution {} is not a positive multiple of 32", m.micro_res);
+  m.check_structure();
   if (m.micro_res > 1024) fail("model micro resolution {} exceeds the chip's 1024", m.micro_res);
-  for (int t = 0; t < kTierCount; ++t)
-    if (m.occupancy[t].res() != m.tier_res(Tier(t)))
-      fail("model {} bitmap has resolution {}, expected {}", tier_name(Tier(t)), m.occupancy[t].res(),
-           m.tier_res(Tier(t)));
-  const size_t fr = size_t(m.fine_res()), cr = size_t(m.coarse_res());
-  if (m.fine_to_block.size() != fr * fr * fr || m.coarse_to_mlp.size() != cr * cr * cr)
-    fail("model lookups are missing (call finalize() after building or editing a model)");
-  for (int a = 0; a < 3; ++a)
-    if (!(m.scene_box.size()[a] > 0.f)) fail("model scene box is empty along axis {}", a);
   if (m.feature_channels < 1 || m.feature_channels > kMaxLayerWidth)
     fail("model has {} feature channels (1..{} supported)", m.feature_channels, kMaxLayerWidth);
   const Bitmap3& coarse = m.occupancy[int(Tier::Coarse)];

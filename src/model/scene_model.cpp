@@ -130,6 +130,19 @@ void SceneModel::dequantize_features() {
   features_f32 = std::move(out);
 }
 
+void SceneModel::check_structure() const {
+  if (micro_res <= 0 || micro_res % 32) fail("model micro resolution {} is not a positive multiple of 32", micro_res);
+  for (int a = 0; a < 3; ++a)
+    if (!(scene_box.size()[a] > 0.f)) fail("model scene box is empty along axis {}", a);
+  for (int t = 0; t < kTierCount; ++t)
+    if (occupancy[t].res() != tier_res(Tier(t)))
+      fail("model {} bitmap has resolution {}, expected {}", tier_name(Tier(t)), occupancy[t].res(),
+           tier_res(Tier(t)));
+  const size_t fr = size_t(fine_res()), cr = size_t(coarse_res());
+  if (fine_to_block.size() != fr * fr * fr || coarse_to_mlp.size() != cr * cr * cr)
+    fail("model lookups are missing (call finalize() after building or editing a model)");
+}
+
 std::vector<std::string> SceneModel::check_invariants() const {
   std::vector<std::string> bad;
   // Each tier is the OR of the tier below.

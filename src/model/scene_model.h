@@ -162,6 +162,10 @@ struct SceneModel {
   // Fills features_f32 from features_q4.
   void dequantize_features();
 
+  // Throws Error unless the structure is usable by a renderer: micro_res a
+  // positive multiple of 32, a non-empty scene box, bitmaps of the tier
+  // resolutions, and the finalize() lookups built.
+  void check_structure() const;
   // Checks the invariants; returns one line per violation (empty when valid).
   std::vector<std::string> check_invariants() const;
 };

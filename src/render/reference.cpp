@@ -41,17 +41,7 @@ void check_arch(const MlpArch& arch, int feature_channels) {
 }
 
 void check_model(const SceneModel& m, const ResolvedForm& form) {
-  if (m.micro_res <= 0 || m.micro_res % 32)
-    fail("model micro resolution {} is not a positive multiple of 32", m.micro_res);
-  for (int a = 0; a < 3; ++a)
-    if (!(m.scene_box.size()[a] > 0.f)) fail("model scene box is empty along axis {}", a);
-  for (int t = 0; t < kTierCount; ++t)
-    if (m.occupancy[t].res() != m.tier_res(Tier(t)))
-      fail("model {} bitmap has resolution {}, expected {}", tier_name(Tier(t)), m.occupancy[t].res(),
-           m.tier_res(Tier(t)));
-  const size_t fr = size_t(m.fine_res()), cr = size_t(m.coarse_res());
-  if (m.fine_to_block.size() != fr * fr * fr || m.coarse_to_mlp.size() != cr * cr * cr)
-    fail("model lookups are missing (call finalize() after building or editing a model)");
+  m.check_structure();
   const size_t F = size_t(m.feature_channels);
   if (F < 1) fail("model has {} feature channels", m.feature_channels);
   const size_t values = m.block_count() * kBlockVerts * F;
