@@ -68,6 +68,7 @@ void TrainConfig::validate() const {
   if (aabb_every < 1 || aabb_start < 0) fail("train config: aabb_every must be >= 1 and aabb_start >= 0");
   if (!(aabb_filter_sigma >= 0.f)) fail("train config: aabb_filter_sigma must not be negative");
   if (!(aabb_keep > 0.f && aabb_keep <= 1.f)) fail("train config: aabb_keep must be in (0, 1]");
+  if (!(prune_weight >= 0.f && prune_weight < 1.f)) fail("train config: prune_weight must be in [0, 1)");
   if (quant_refit_every < 1) fail("train config: quant_refit_every must be at least 1");
   if (downscale < 1) fail("train config: downscale must be at least 1");
   for (float b : background)
@@ -150,6 +151,7 @@ const std::map<std::string, Field>& fields() {
       {"aabb_every", scalar(&TrainConfig::aabb_every)},
       {"aabb_filter_sigma", scalar(&TrainConfig::aabb_filter_sigma)},
       {"aabb_keep", scalar(&TrainConfig::aabb_keep)},
+      {"prune_weight", scalar(&TrainConfig::prune_weight)},
       {"quant_refit_every", scalar(&TrainConfig::quant_refit_every)},
       {"seed", scalar(&TrainConfig::seed)},
       {"downscale", scalar(&TrainConfig::downscale)},

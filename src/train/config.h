@@ -52,6 +52,10 @@ struct TrainConfig {
   float aabb_filter_sigma = 0.6f;  // Gaussian filter of the occupancy, in micro voxels
   float aabb_keep = 0.35f;         // filtered occupancy kept in the AABB
 
+  // --- pruning ---
+  float prune_weight = 1e-3f;  // at the start of quantization-aware training, micro voxels whose samples never
+                               // weighed (T alpha) this much in the per-CV phase are emptied; 0: keep all
+
   // --- quantization ---
   int quant_refit_every = 16;  // steps between refits of the INT4 feature ranges
 

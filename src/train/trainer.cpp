@@ -106,6 +106,7 @@ struct Batch {
   std::vector<uint8_t> active;  // before termination
   std::vector<float> rgb;       // 3 per sample
   std::vector<float> d_raw;     // 1 per sample
+  std::vector<float> weight;    // 1 per sample: T alpha
   std::vector<float> d_z;       // 3 per sample: gradient before the sigmoid
   std::vector<float> d_feat;    // F per sample
 
@@ -125,6 +126,7 @@ struct Batch {
     active.resize(cap);
     rgb.resize(3 * cap);
     d_raw.resize(cap);
+    weight.resize(cap);
     d_z.resize(3 * cap);
     d_feat.resize(cap * size_t(F));
   }
@@ -192,6 +194,9 @@ struct Trainer::State {
   std::vector<float> mlp_params, mlp_m, mlp_v;
   std::vector<float> mlp_eff;       // fake-quantized weights in the quantization-aware phase
   std::vector<float> layer_in_max;  // per MLP x layer: largest |input| seen in the quantization-aware phase
+
+  // Largest sample weight seen per micro voxel in the per-CV phase (for pruning).
+  std::vector<float> max_weight;
 
   // Float snapshot when quantization-aware training begins.
   std::vector<float> float_blocks, float_mlps;
@@ -590,6 +595,12 @@ struct Trainer::State {
         }
         b.ray_sq_err[size_t(i)] = se;
         if (!with_grad || cnt == 0) continue;
+        float T = 1.f;
+        for (int j = 0; j < cnt; ++j) {
+          const float tau = sigma_of_raw(raw[size_t(j)]) * delta;
+          b.weight[size_t(b.order[size_t(first + j)])] = T * alpha_of_tau(tau);
+          T *= std::exp(-tau);
+        }
         d_raw.resize(size_t(cnt));
         d_rgb.resize(3 * size_t(cnt));
         composite_backward(raw.data(), rgb.data(), cnt, delta, bg, d_pixel, d_raw.data(), d_rgb.data());
@@ -850,11 +861,83 @@ struct Trainer::State {
     mlp_v.assign(mlp_params.size(), 0.f);
     feature_adam_t = 0;
     mlp_adam_t = 0;
+    if (cfg.prune_weight > 0.f) max_weight.assign(occ.density.size(), 0.f);
     phase = Phase::PerCv;
+  }
+
+  // Empties the micro voxels whose samples never weighed prune_weight in the
+  // per-CV phase (the inside of solids, faint fog), drops the blocks and MLPs
+  // left without occupied voxels, and tightens the AABB.
+  void prune() {
+    const int R = cfg.micro_res;
+    Bitmap3 kept(R);
+    Vec3i lo{R, R, R}, hi{-1, -1, -1};
+    for (int z = 0; z < R; ++z)
+      for (int y = 0; y < R; ++y)
+        for (int x = 0; x < R; ++x) {
+          const size_t i = kept.index(x, y, z);
+          if (!occ.micro.get(i) || max_weight[i] < cfg.prune_weight) continue;
+          kept.set(i);
+          lo = vmin(lo, Vec3i{x, y, z});
+          hi = vmax(hi, Vec3i{x, y, z});
+        }
+    max_weight.clear();
+    max_weight.shrink_to_fit();
+    if (hi.x < 0) return;  // nothing would remain: keep the occupancy as it is
+    occ.micro = std::move(kept);
+    occ.aabb_lo = lo;
+    occ.aabb_hi = hi;
+    occ.rebuild_macro();
+    // Blocks of fine voxels that still hold an occupied micro voxel.
+    const size_t F_ = size_t(F);
+    std::vector<uint32_t> fine_index;
+    std::vector<float> values, m, v;
+    const auto& old_index = blocks.fine_index();
+    const int fr = R / kMicroPerFine;
+    for (size_t bi = 0; bi < old_index.size(); ++bi) {
+      const uint32_t fi = old_index[bi];
+      const int fx = int(fi % uint32_t(fr)), fy = int((fi / uint32_t(fr)) % uint32_t(fr)),
+                fz = int(fi / uint32_t(fr * fr));
+      if (!occ.fine.get(fx, fy, fz)) continue;
+      fine_index.push_back(fi);
+      const size_t o = bi * kBlockVerts * F_, len = kBlockVerts * F_;
+      values.insert(values.end(), blocks.values().begin() + ptrdiff_t(o), blocks.values().begin() + ptrdiff_t(o + len));
+      m.insert(m.end(), blocks.adam().m.begin() + ptrdiff_t(o), blocks.adam().m.begin() + ptrdiff_t(o + len));
+      v.insert(v.end(), blocks.adam().v.begin() + ptrdiff_t(o), blocks.adam().v.begin() + ptrdiff_t(o + len));
+    }
+    blocks = BlockFeatures(R, F, std::move(fine_index), std::move(values));
+    blocks.adam().m = std::move(m);
+    blocks.adam().v = std::move(v);
+    // MLPs of coarse voxels that still hold an occupied fine voxel.
+    const int cr = R / 32;
+    std::vector<uint8_t> cv_used(size_t(cr) * cr * cr, 0);
+    for (uint32_t fi : blocks.fine_index()) {
+      const int fx = int(fi % uint32_t(fr)), fy = int((fi / uint32_t(fr)) % uint32_t(fr)),
+                fz = int(fi / uint32_t(fr * fr));
+      cv_used[linear_index(fx / kFinePerCoarse, fy / kFinePerCoarse, fz / kFinePerCoarse, cr)] = 1;
+    }
+    const size_t P = layout.param_count;
+    std::vector<uint32_t> new_cv;
+    std::vector<float> params, pm, pv;
+    for (size_t mi = 0; mi < mlp_cv.size(); ++mi) {
+      if (!cv_used[mlp_cv[mi]]) continue;
+      new_cv.push_back(mlp_cv[mi]);
+      params.insert(params.end(), mlp_params.begin() + ptrdiff_t(mi * P), mlp_params.begin() + ptrdiff_t((mi + 1) * P));
+      pm.insert(pm.end(), mlp_m.begin() + ptrdiff_t(mi * P), mlp_m.begin() + ptrdiff_t((mi + 1) * P));
+      pv.insert(pv.end(), mlp_v.begin() + ptrdiff_t(mi * P), mlp_v.begin() + ptrdiff_t((mi + 1) * P));
+    }
+    mlp_cv = std::move(new_cv);
+    mlp_params = std::move(params);
+    mlp_m = std::move(pm);
+    mlp_v = std::move(pv);
+    cv_to_mlp.assign(size_t(cr) * cr * cr, -1);
+    for (size_t mi = 0; mi < mlp_cv.size(); ++mi) cv_to_mlp[mlp_cv[mi]] = int32_t(mi);
+    n_mlps = std::max<int>(1, int(mlp_cv.size()));
   }
 
   void start_quantization() {
     if (mse_ema > 0) psnr_float = -10.0 * std::log10(mse_ema);
+    if (!max_weight.empty()) prune();
     float_blocks = blocks.values();
     float_mlps = mlp_params;
     feature_quant = blocks.fit_quantization();
@@ -901,6 +984,12 @@ struct Trainer::State {
     evaluate_color(b);
     lap(kColor);
     const double se = composite_rays(b, true);
+    if (phase == Phase::PerCv && !max_weight.empty())
+      for (int32_t s : b.order) {
+        const size_t cell = size_t(linear_index(b.micro[3 * size_t(s)], b.micro[3 * size_t(s) + 1],
+                                                b.micro[3 * size_t(s) + 2], cfg.micro_res));
+        max_weight[cell] = std::max(max_weight[cell], b.weight[size_t(s)]);
+      }
     lap(kComposite);
     std::vector<float> grad;
     backward_mlps(b, grad, phase == Phase::Quantize);
@@ -1070,6 +1159,7 @@ struct Trainer::State {
     w.put("mlp_m", mlp_m);
     w.put("mlp_v", mlp_v);
     w.put("layer_in_max", layer_in_max);
+    w.put("max_weight", max_weight);
     w.put("float_blocks", float_blocks);
     w.put("float_mlps", float_mlps);
     return w.finish();
@@ -1152,6 +1242,8 @@ struct Trainer::State {
     expect_size("mlp_v", mlp_v.size(), mlp_params.size());
     layer_in_max = r.get<float>("layer_in_max");
     if (phase >= Phase::Quantize) update_fake_quantized_mlps();
+    max_weight = r.get<float>("max_weight");
+    if (!max_weight.empty()) expect_size("max_weight", max_weight.size(), occ.density.size());
     float_blocks = r.get<float>("float_blocks");
     float_mlps = r.get<float>("float_mlps");
   }

@@ -117,6 +117,21 @@ TEST(Train, LearnsAProceduralSceneAndExportsAValidModel) {
   EXPECT_EQ(t.quantized.mlps_q8.size(), t.quantized.mlp_count());
   EXPECT_LE(t.quantized.mlp_arch.q8_bytes(), kMlpCacheBytes);
   EXPECT_GT(t.quantized.block_count(), 0u);
+  // The AABB is the tight box of the occupied micro voxels (pruning tightens it).
+  const Bitmap3& micro = t.quantized.occupancy[int(Tier::Micro)];
+  Vec3i lo{1 << 20, 1 << 20, 1 << 20}, hi{-1, -1, -1};
+  for (int z = 0; z < micro.res(); ++z)
+    for (int y = 0; y < micro.res(); ++y)
+      for (int x = 0; x < micro.res(); ++x)
+        if (micro.get(x, y, z)) {
+          lo = vmin(lo, Vec3i{x, y, z});
+          hi = vmax(hi, Vec3i{x, y, z});
+        }
+  const Vec3f vs = t.quantized.micro_voxel_size();
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_FLOAT_EQ(t.quantized.object_aabb.lo[a], t.quantized.scene_box.lo[a] + vs[a] * float(lo[a]));
+    EXPECT_FLOAT_EQ(t.quantized.object_aabb.hi[a], t.quantized.scene_box.lo[a] + vs[a] * float(hi[a] + 1));
+  }
   const Dataset test = load("test");
   const double pf = mean_psnr(t.float_model, test, ModelForm::Float);
   const double pq = mean_psnr(t.quantized, test, ModelForm::Quantized);
