@@ -41,6 +41,7 @@ const char* phase_name(Phase p) {
 namespace {
 
 constexpr int kItemSamples = 1024;  // samples per work item: one MLP gradient partial each
+constexpr int64_t kPlanStep = 120;  // --minutes fixes the step count here; the learning rate decays from here
 constexpr int kFirstRoundSamples = 16;
 constexpr int kMaxRoundSamples = 256;
 
@@ -246,8 +247,13 @@ struct Trainer::State {
     return std::max(freeze_step(), int64_t(std::llround(double(iters) * (1.0 - cfg.qat_fraction))));
   }
 
+  // Warm-up, then constant until kPlanStep, then exponential decay to lr_final
+  // at the last step: steps before kPlanStep do not depend on iters, so a
+  // --minutes run (whose step count is fixed at kPlanStep) is replayed exactly
+  // by --iters with the count it chose.
   float lr_factor(int64_t t) const {
-    double f = std::pow(double(cfg.lr_final), double(t) / double(std::max<int64_t>(1, iters)));
+    const double e = double(std::max<int64_t>(0, t - kPlanStep)) / double(std::max<int64_t>(1, iters - kPlanStep));
+    double f = std::pow(double(cfg.lr_final), std::min(1.0, e));
     if (cfg.lr_warmup > 0 && t < cfg.lr_warmup) f *= double(t + 1) / double(cfg.lr_warmup + 1);
     return float(f);
   }
@@ -1335,7 +1341,10 @@ bool Trainer::run(const TrainOptions& options) {
   double steps_per_s = 0;
   int64_t rate_step = s.step;
   auto rate_time = t_start;
-  const int64_t calibrate_from = s.step + 20, calibrate_at = s.step + 120;
+  // --minutes: time steps from calibrate_from to calibrate_at (kPlanStep unless
+  // the run starts too close to it) and fix the step count there.
+  const int64_t calibrate_at = std::max<int64_t>(kPlanStep, s.step + 10);
+  const int64_t calibrate_from = std::max<int64_t>(s.step, std::min<int64_t>(20, calibrate_at - 10));
   auto calib_time = t_start;
   auto log = [&](const std::string& m) {
     if (options.log) options.log(m);

@@ -189,6 +189,26 @@ TEST(Train, ResumedRunEndsInTheSameBitsAsAnUninterruptedOne) {
   EXPECT_EQ(model_bytes(c3, false), model_bytes(whole, false));
 }
 
+TEST(Train, AStepCountFixedAtTheCalibrationStepReplaysExactly) {
+  // --minutes trains with a provisional count and fixes it after 120 steps;
+  // the learning rate does not depend on the count before then, so --iters
+  // with the chosen count gives the same bits.
+  const Dataset data = load("train");
+  TrainConfig provisional = short_config();
+  provisional.iters = 5000;
+  Trainer a(data, provisional);
+  TrainOptions o;
+  o.stop_after = 120;
+  ASSERT_FALSE(a.run(o));
+  a.set_iters(200);
+  ASSERT_TRUE(a.run({}));
+  TrainConfig fixed = short_config();
+  fixed.iters = 200;
+  Trainer b(data, fixed);
+  ASSERT_TRUE(b.run({}));
+  EXPECT_EQ(model_bytes(a, true), model_bytes(b, true));
+}
+
 TEST(Train, ResultDoesNotDependOnTheThreadCount) {
   const Dataset data = load("train");
   TrainOptions one, two;
