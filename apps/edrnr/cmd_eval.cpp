@@ -1,5 +1,7 @@
-// edrnr eval: renders dataset views with the reference renderer and compares
-// them with the ground-truth images (PSNR, SSIM).
+// edrnr eval: renders dataset views with a render engine (the reference
+// renderer, or the bit-accurate chip model) and compares them with the
+// ground-truth images (PSNR, SSIM). With the chip engine it also reports each
+// view's PSNR against the reference renderer's image of the same model.
 #include <fmt/format.h>
 
 #include <chrono>
@@ -17,6 +19,7 @@
 #include "core/image.h"
 #include "core/metrics.h"
 #include "data/dataset.h"
+#include "engines.h"
 #include "model/model_io.h"
 #include "render/options.h"
 #include "render/reference.h"
@@ -29,7 +32,7 @@ struct EvalOptions {
   std::string views, json_path, save_dir;
   int limit = 0, downscale = 1;
   float step = 1.f;
-  std::string form = "auto", background = "white";
+  std::string form = "auto", background = "white", engine = "reference";
   int threads = 0;
   CLI::Option *views_opt, *limit_opt;
 };
@@ -77,6 +80,8 @@ void run_eval(const EvalOptions& o) {
   if (o.limit_opt->count() && o.limit < 1) fail("--limit {}: must be at least 1", o.limit);
   if (o.downscale < 1) fail("--downscale {}: must be a positive integer", o.downscale);
   if (o.threads < 0) fail("--threads {}: must be 0 (all cores) or more", o.threads);
+  const Engine& engine = find_engine(o.engine);
+  const bool vs_reference = std::string(engine.name) != "reference";
   RenderSettings s;
   s.step_micro = o.step;
   s.form = parse_model_form(o.form, "--form");
@@ -100,22 +105,28 @@ void run_eval(const EvalOptions& o) {
   if (!o.save_dir.empty()) std::filesystem::create_directories(o.save_dir);
 
   nlohmann::ordered_json per_view = nlohmann::ordered_json::array();
-  double psnr_sum = 0, ssim_sum = 0, seconds_sum = 0;
-  fmt::print("{:>6} {:>9} {:>8} {:>9} {:>12}  {}\n", "view", "PSNR dB", "SSIM", "seconds", "samples/ray", "image");
+  double psnr_sum = 0, ssim_sum = 0, seconds_sum = 0, vs_ref_sum = 0;
+  fmt::print("{:>6} {:>9} {:>8} {:>9} {:>12}{}  {}\n", "view", "PSNR dB", "SSIM", "seconds", "samples/ray",
+             vs_reference ? "  vs ref dB" : "", "image");
   for (int v : views) {
     const Frame& f = ds.frames[size_t(v)];
     const Image truth = load_ground_truth(f, o.downscale, s.background);
     RenderStats stats;
     const auto t0 = std::chrono::steady_clock::now();
-    const Image img = render_reference(model, f.camera, s, &stats);
+    const Image img = engine.render(model, f.camera, s, &stats);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const double p = psnr(img, truth), q = ssim(img, truth);
     psnr_sum += p;
     ssim_sum += q;
     seconds_sum += seconds;
+    double vs_ref = 0;
+    if (vs_reference) {
+      vs_ref = psnr(img, render_reference(model, f.camera, s));
+      vs_ref_sum += vs_ref;
+    }
     const double spr = stats.rays ? double(stats.samples) / double(stats.rays) : 0.0;
-    fmt::print("{:>6} {:>9.3f} {:>8.4f} {:>9.2f} {:>12.2f}  {}\n", v, p, q, seconds, spr,
-               f.image_path.filename().string());
+    fmt::print("{:>6} {:>9.3f} {:>8.4f} {:>9.2f} {:>12.2f}{}  {}\n", v, p, q, seconds, spr,
+               vs_reference ? fmt::format(" {:>10.3f}", vs_ref) : "", f.image_path.filename().string());
     std::fflush(stdout);
     if (!o.save_dir.empty())
       write_png(std::filesystem::path(o.save_dir) / fmt::format("{}_{:03d}.png", o.split, v), img);
@@ -126,9 +137,11 @@ void run_eval(const EvalOptions& o) {
                         {"seconds", seconds},
                         {"rays", stats.rays},
                         {"samples", stats.samples}});
+    if (vs_reference) per_view.back()["psnr_vs_reference_db"] = vs_ref;
   }
   const double n = double(views.size());
-  fmt::print("{:>6} {:>9.3f} {:>8.4f} {:>9.2f}\n", "mean", psnr_sum / n, ssim_sum / n, seconds_sum / n);
+  fmt::print("{:>6} {:>9.3f} {:>8.4f} {:>9.2f}{}\n", "mean", psnr_sum / n, ssim_sum / n, seconds_sum / n,
+             vs_reference ? fmt::format(" {:>12} {:>10.3f}", "", vs_ref_sum / n) : "");
   if (!o.json_path.empty()) {
     nlohmann::ordered_json j;
     j["model"] = o.model;
@@ -137,10 +150,12 @@ void run_eval(const EvalOptions& o) {
     j["downscale"] = o.downscale;
     j["step_micro"] = o.step;
     j["form"] = o.form;
+    j["engine"] = engine.name;
     j["background"] = {s.background[0], s.background[1], s.background[2]};
     j["views"] = per_view;
     j["mean_psnr_db"] = psnr_sum / n;
     j["mean_ssim"] = ssim_sum / n;
+    if (vs_reference) j["mean_psnr_vs_reference_db"] = vs_ref_sum / n;
     write_file_atomic(o.json_path, j.dump(2) + "\n");
   }
 }
@@ -161,6 +176,10 @@ void register_eval_cmd(CLI::App& app) {
   cmd->add_option("--background", o->background, "white, black or R,G,B (also composites the images)")
       ->capture_default_str();
   cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();
+  cmd->add_option("--engine", o->engine,
+                  "renderer: reference (float golden) or chip (bit-accurate chip model; also reports PSNR "
+                  "against the reference renderer)")
+      ->capture_default_str();
   cmd->callback([o] { run_eval(*o); });
 }
 

@@ -11,34 +11,14 @@
 #include "core/error.h"
 #include "core/image.h"
 #include "data/dataset.h"
+#include "engines.h"
 #include "model/model_io.h"
 #include "render/cameras.h"
 #include "render/options.h"
 #include "render/reference.h"
-#include "chip/chip.h"
 
 namespace edrnr::cli {
 namespace {
-
-// The renderers `--engine` can pick. A new engine is one more line here.
-struct Engine {
-  const char* name;
-  const char* description;
-  Image (*render)(const SceneModel&, const Camera&, const RenderSettings&, RenderStats*);
-};
-const Engine kEngines[] = {
-    {"reference", "float volume rendering, the golden model", render_reference},
-    {"chip", "bit-accurate EDR-NR chip model (configs/chip/default.yaml settings)", render_chip_engine},
-};
-
-const Engine& find_engine(const std::string& name) {
-  std::string names;
-  for (const Engine& e : kEngines) {
-    if (name == e.name) return e;
-    names += (names.empty() ? "" : ", ") + std::string(e.name);
-  }
-  fail("--engine '{}': unknown (available: {})", name, names);
-}
 
 struct RenderOptions {
   std::string model, output;
@@ -146,7 +126,8 @@ void register_render_cmd(CLI::App& app) {
   cmd->add_option("--form", o->form, "auto, float or quantized")->capture_default_str();
   cmd->add_option("--background", o->background, "white, black or R,G,B")->capture_default_str();
   cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();
-  cmd->add_option("--engine", o->engine, "renderer: reference (float golden) or chip (bit-accurate chip model)")->capture_default_str();
+  cmd->add_option("--engine", o->engine, "renderer: reference (float golden) or chip (bit-accurate chip model)")
+      ->capture_default_str();
   cmd->callback([o] { run_render(*o); });
 }
 

@@ -82,6 +82,19 @@ TEST_F(Commands, EvalScoresTheModelThatMadeTheDataset) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   j = nlohmann::json::parse(read_file_text(dir_ / "bad.json"));
   EXPECT_LT(j["mean_psnr_db"].get<double>(), 30.0) << r.out;
+
+  // The chip engine renders the same quantized model to within the chip's
+  // quality bar (40 dB) of the reference renderer, and so of the images.
+  r = run("eval " + good.string() + " " + root.string() + " --engine chip --json " + (dir_ / "chip.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  j = nlohmann::json::parse(read_file_text(dir_ / "chip.json"));
+  EXPECT_EQ(j["engine"], "chip");
+  EXPECT_GE(j["mean_psnr_vs_reference_db"].get<double>(), 40.0) << r.out;
+  EXPECT_GE(j["views"][1]["psnr_vs_reference_db"].get<double>(), 40.0) << r.out;
+  EXPECT_GT(j["mean_psnr_db"].get<double>(), 38.0) << r.out;
+  r = run("eval " + good.string() + " " + root.string() + " --engine gpu");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("--engine 'gpu'"), std::string::npos) << r.err;
 }
 
 // `simulate` writes its four outputs; switching a scheduling technique off

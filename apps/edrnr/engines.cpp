@@ -1,0 +1,28 @@
+#include "engines.h"
+
+#include <string>
+
+#include "chip/chip.h"
+#include "core/error.h"
+#include "render/reference.h"
+
+namespace edrnr::cli {
+namespace {
+
+const Engine kEngines[] = {
+    {"reference", "float volume rendering, the golden model", render_reference},
+    {"chip", "bit-accurate EDR-NR chip model (configs/chip/default.yaml settings)", render_chip_engine},
+};
+
+}  // namespace
+
+const Engine& find_engine(const std::string& name) {
+  std::string names;
+  for (const Engine& e : kEngines) {
+    if (name == e.name) return e;
+    names += (names.empty() ? "" : ", ") + std::string(e.name);
+  }
+  fail("--engine '{}': unknown (available: {})", name, names);
+}
+
+}  // namespace edrnr::cli
