@@ -51,6 +51,7 @@ void TrainConfig::validate() const {
   if (!(transmittance_min > 0.f && transmittance_min < 1.f)) fail("train config: transmittance_min must be in (0, 1)");
   if (iters < 1) fail("train config: iters must be at least 1");
   if (minutes < 0) fail("train config: minutes must not be negative");
+  if (plan_step < 10) fail("train config: plan_step must be at least 10");
   if (!(per_cv_fraction >= 0.f && qat_fraction >= 0.f && per_cv_fraction + qat_fraction < 1.f))
     fail("train config: per_cv_fraction and qat_fraction must be >= 0 and sum to less than 1");
   if (batch_samples < 1024) fail("train config: batch_samples must be at least 1024");
@@ -130,6 +131,7 @@ const std::map<std::string, Field>& fields() {
       {"random_background", scalar(&TrainConfig::random_background)},
       {"iters", scalar(&TrainConfig::iters)},
       {"minutes", scalar(&TrainConfig::minutes)},
+      {"plan_step", scalar(&TrainConfig::plan_step)},
       {"per_cv_fraction", scalar(&TrainConfig::per_cv_fraction)},
       {"qat_fraction", scalar(&TrainConfig::qat_fraction)},
       {"batch_samples", scalar(&TrainConfig::batch_samples)},

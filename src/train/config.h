@@ -28,6 +28,9 @@ struct TrainConfig {
   // --- schedule ---
   int64_t iters = 20000;          // total steps
   double minutes = 0;             // > 0: choose iters to fit this budget (measured after a calibration)
+  int64_t plan_step = 1000;       // the learning rate holds until this step; --minutes fixes iters here (or
+                                  // earlier, once a quarter of the budget is spent) from the speed measured
+                                  // over the last 40 % of the steps, when empty space is already skipped
   float per_cv_fraction = 0.1f;   // share of steps training per-CV MLPs in float
   float qat_fraction = 0.1f;      // share of steps of quantization-aware training (last)
   int64_t batch_samples = 65536;  // target samples evaluated per step

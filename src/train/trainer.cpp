@@ -41,7 +41,6 @@ const char* phase_name(Phase p) {
 namespace {
 
 constexpr int kItemSamples = 1024;  // samples per work item: one MLP gradient partial each
-constexpr int64_t kPlanStep = 120;  // --minutes fixes the step count here; the learning rate decays from here
 constexpr int kFirstRoundSamples = 16;
 constexpr int kMaxRoundSamples = 256;
 
@@ -247,12 +246,13 @@ struct Trainer::State {
     return std::max(freeze_step(), int64_t(std::llround(double(iters) * (1.0 - cfg.qat_fraction))));
   }
 
-  // Warm-up, then constant until kPlanStep, then exponential decay to lr_final
-  // at the last step: steps before kPlanStep do not depend on iters, so a
-  // --minutes run (whose step count is fixed at kPlanStep) is replayed exactly
+  // Warm-up, then constant until cfg.plan_step, then exponential decay to
+  // lr_final at the last step: steps before plan_step do not depend on iters,
+  // so a --minutes run (whose step count is fixed by then) is replayed exactly
   // by --iters with the count it chose.
   float lr_factor(int64_t t) const {
-    const double e = double(std::max<int64_t>(0, t - kPlanStep)) / double(std::max<int64_t>(1, iters - kPlanStep));
+    const int64_t hold = cfg.plan_step;
+    const double e = double(std::max<int64_t>(0, t - hold)) / double(std::max<int64_t>(1, iters - hold));
     double f = std::pow(double(cfg.lr_final), std::min(1.0, e));
     if (cfg.lr_warmup > 0 && t < cfg.lr_warmup) f *= double(t + 1) / double(cfg.lr_warmup + 1);
     return float(f);
@@ -1341,11 +1341,10 @@ bool Trainer::run(const TrainOptions& options) {
   double steps_per_s = 0;
   int64_t rate_step = s.step;
   auto rate_time = t_start;
-  // --minutes: time steps from calibrate_from to calibrate_at (kPlanStep unless
-  // the run starts too close to it) and fix the step count there.
-  const int64_t calibrate_at = std::max<int64_t>(kPlanStep, s.step + 10);
-  const int64_t calibrate_from = std::max<int64_t>(s.step, std::min<int64_t>(20, calibrate_at - 10));
-  auto calib_time = t_start;
+  // --minutes: the time at each step of this run, to fix the step count at
+  // plan_step (or once a quarter of the budget is spent) from the speed over
+  // the last 40 % of the steps since the run started.
+  std::vector<double> step_seconds;
   auto log = [&](const std::string& m) {
     if (options.log) options.log(m);
   };
@@ -1361,15 +1360,22 @@ bool Trainer::run(const TrainOptions& options) {
     if (options.interrupt && options.interrupt->load()) break;
     // --minutes: fix the number of steps from the measured speed.
     if (s.cfg.minutes > 0 && !s.iters_fixed && s.phase == Phase::Main) {
-      if (s.step == calibrate_from) calib_time = clock::now();
-      if (s.step == calibrate_at) {
-        const double per_step =
-            std::chrono::duration<double>(clock::now() - calib_time).count() / double(calibrate_at - calibrate_from);
-        const double left = s.cfg.minutes * 60.0 - std::chrono::duration<double>(clock::now() - t_start).count();
+      const double elapsed = std::chrono::duration<double>(clock::now() - t_start).count();
+      step_seconds.push_back(elapsed);
+      const int64_t done = int64_t(step_seconds.size()) - 1;  // steps timed in this run
+      if (done >= 10 && (s.step >= s.cfg.plan_step || elapsed >= 0.25 * s.cfg.minutes * 60.0)) {
+        const int64_t from = done * 6 / 10;
+        const double per_step = (elapsed - step_seconds[size_t(from)]) / double(done - from);
+        const double left = s.cfg.minutes * 60.0 - elapsed;
         // Keep a tenth of the budget for the freeze, the slower final phases and the export.
-        const int64_t more = int64_t(0.9 * left / std::max(per_step, 1e-6));
-        set_iters(std::max<int64_t>(s.step + 1, s.step + more));
-        log(fmt::format("{:.3f} s per step: training for {} steps", per_step, s.iters));
+        int64_t n = s.step + std::max<int64_t>(1, int64_t(0.9 * left / std::max(per_step, 1e-6)));
+        // The main phase must not have ended already: a replay with --iters n
+        // changes phase at the same step.
+        const double main_share = 1.0 - double(s.cfg.per_cv_fraction) - double(s.cfg.qat_fraction);
+        n = std::max<int64_t>(n, int64_t(std::ceil(double(s.step + 1) / main_share)) + 1);
+        set_iters(n);
+        log(fmt::format("{:.3f} s per step over steps {}..{}: training for {} steps", per_step, s.step - (done - from),
+                        s.step, s.iters));
       }
     }
     s.do_step();

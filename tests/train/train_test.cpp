@@ -80,6 +80,7 @@ TrainConfig small_config() {
   c.aabb_start = 64;
   c.aabb_every = 64;
   c.lr_warmup = 20;
+  c.plan_step = 120;
   c.seed = 7;
   return c;
 }
@@ -190,9 +191,9 @@ TEST(Train, ResumedRunEndsInTheSameBitsAsAnUninterruptedOne) {
 }
 
 TEST(Train, AStepCountFixedAtTheCalibrationStepReplaysExactly) {
-  // --minutes trains with a provisional count and fixes it after 120 steps;
-  // the learning rate does not depend on the count before then, so --iters
-  // with the chosen count gives the same bits.
+  // --minutes trains with a provisional count and fixes it by plan_step (120
+  // here); the learning rate does not depend on the count before then, so
+  // --iters with the chosen count gives the same bits.
   const Dataset data = load("train");
   TrainConfig provisional = short_config();
   provisional.iters = 5000;
