@@ -103,6 +103,26 @@ TEST_F(InspectCli, JsonReport) {
   EXPECT_EQ(j["ok"], true);
 }
 
+// The bundled model (assets/default.edrnr, what the demo simulates) is a
+// trained model the chip can run: every structural check passes, it is
+// quantized, each MLP fits the 8448-byte MLP cache, and it stays within the
+// 20 MB the repository allows.
+TEST_F(InspectCli, BundledModelIsAChipModel) {
+  const fs::path p = fs::path(EDRNR_SOURCE_DIR) / "assets" / "default.edrnr";
+  ASSERT_TRUE(fs::exists(p)) << p;
+  EXPECT_LE(fs::file_size(p), 20u * 1000 * 1000);
+  RunResult r = run("inspect --json " + p.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["ok"], true);
+  EXPECT_EQ(j["micro_res"], 256);
+  EXPECT_EQ(j["features"]["int4"], true);
+  EXPECT_GT(j["features"]["blocks"].get<int>(), 0);
+  EXPECT_EQ(j["mlps"]["count"], j["tiers"][0]["occupied"]);
+  EXPECT_EQ(j["mlps"]["fits_mlp_cache"], true);
+  EXPECT_EQ(j["metadata"]["producer"], "edrnr train");
+}
+
 TEST_F(InspectCli, MlpTooLargeForTheCache) {
   // 2x64 + 64x64 + 67x64 + 64x3 = 8704 weights alone: more than 8448 bytes.
   fs::path p = save(hand_model({2, 64, 64}, {67, 64, 3}), "big.edrnr");
