@@ -10,6 +10,9 @@ namespace edrnr::chip {
 
 namespace {
 
+// The step of the INT8 direction inputs: +-1 maps to the largest code.
+double direction_step(const ChipNumerics& n) { return 1.0 / double(fx::max_signed(n.activation_bits)); }
+
 fx::Requant requant_or_fail(double scale, int bits, size_t mlp, const char* what) {
   if (!std::isfinite(scale) || scale < 0.0)
     fail("INT8 MLP {}: {} scale {} is not a finite non-negative number", mlp, what, scale);
@@ -83,8 +86,7 @@ TmeMlp compile_tme_mlp(const SceneModel& model, size_t index, const ChipNumerics
   }
   m.geo_in = requant_or_fail(std::ldexp(1.0 / c_in, -n.mlp_output_frac_bits), n.requant_multiplier_bits, index,
                              "density-to-colour input");
-  m.dir_in = requant_or_fail(std::ldexp(1.0 / c_in, -n.direction_code_frac_bits), n.requant_multiplier_bits, index,
-                             "direction input");
+  m.dir_in = requant_or_fail(direction_step(n) / c_in, n.requant_multiplier_bits, index, "direction partial sum");
   m.stored_bytes = arch.q8_bytes();
   return m;
 }
@@ -109,7 +111,9 @@ Tme::Tme(const SceneModel& model, const ChipNumerics& numerics, double delta, si
       alpha_lut_(make_alpha_lut(delta, numerics.mlp_output_frac_bits, numerics.lut_address_bits, numerics.alpha_bits,
                                 numerics.rounding)),
       sigmoid_lut_(make_sigmoid_lut(numerics.mlp_output_frac_bits, numerics.lut_address_bits, numerics.color_bits,
-                                    numerics.rounding)) {
+                                    numerics.rounding)),
+      dir_code_(fx::requant_from_scale(std::ldexp(1.0 / direction_step(numerics), -numerics.direction_code_frac_bits),
+                                       numerics.requant_multiplier_bits)) {
   if (model.mlp_count() > 0 && model.mlps_q8.size() != model.mlp_count())
     fail("model has no INT8 MLPs for its {} coarse voxels (the chip runs only the quantized form)", model.mlp_count());
   for (size_t i = 0; i < model.mlps_q8.size(); ++i) {
@@ -129,8 +133,10 @@ void Tme::load(uint32_t cv_tag) {
   counters_.mlp_load_bytes += mlps_[size_t(m)].stored_bytes;
 }
 
-void Tme::layer(const TmeLayer& L, const int32_t* x, int32_t* y, bool hidden, int out_bits) {
+void Tme::layer(const TmeLayer& L, const int32_t* x, int32_t* y, bool hidden, int out_bits, int split,
+                const fx::Requant* split_q) {
   const int A = n_.accumulator_bits;
+  const int main_in = split >= 0 ? split : L.in;
   const int64_t acc_max = fx::max_signed(A);
   const int64_t x_max = int64_t(1) << (n_.activation_bits - 1);  // |x| <= 2^(activation_bits-1)
   for (int j = 0; j < L.out; ++j) {
@@ -141,14 +147,25 @@ void Tme::layer(const TmeLayer& L, const int32_t* x, int32_t* y, bool hidden, in
       // No partial sum can reach the accumulator's limits: saturating after
       // each addition would change nothing.
       int64_t sum = 0;
-      for (int i = 0; i < L.in; ++i) sum += int32_t(w[i]) * x[i];
+      for (int i = 0; i < main_in; ++i) sum += int32_t(w[i]) * x[i];
       acc += sum;
     } else {
-      for (int i = 0; i < L.in; ++i) {
+      for (int i = 0; i < main_in; ++i) {
         const int64_t sum = acc + int64_t(w[i]) * x[i];
         acc = fx::saturate(sum, A);
         counters_.saturations += acc != sum;
       }
+    }
+    if (split >= 0) {
+      // The direction products in an accumulator of their own (at most
+      // in * 2^14 in magnitude), then to accumulator units.
+      int64_t part = 0;
+      for (int i = split; i < L.in; ++i) part += int32_t(w[i]) * x[i];
+      const int64_t p = fx::saturate(part, A);
+      counters_.saturations += p != part;
+      const int64_t sum = acc + fx::requantize(p, *split_q, n_.rounding);
+      acc = fx::saturate(sum, A);
+      counters_.saturations += acc != sum;
     }
     counters_.macs += uint64_t(L.in);
     const int64_t v = hidden ? std::max<int64_t>(acc, 0) : acc;
@@ -184,11 +201,11 @@ TmeOutput Tme::eval(const int32_t* feature, const std::vector<int32_t>& dir_code
   // Colour net input: density outputs, then the direction encoding.
   const int G = m.density.back().out;
   for (int g = 0; g < G; ++g) y[g] = in_stage(x[g], m.geo_in);
-  for (size_t i = 0; i < dir_code.size(); ++i) y[size_t(G) + i] = in_stage(dir_code[i], m.dir_in);
+  for (size_t i = 0; i < dir_code.size(); ++i) y[size_t(G) + i] = in_stage(dir_code[i], dir_code_);
   std::swap(x, y);
   for (size_t l = 0; l < m.color.size(); ++l) {
     const bool hidden = l + 1 < m.color.size();
-    layer(m.color[l], x, y, hidden, hidden ? act : outb);
+    layer(m.color[l], x, y, hidden, hidden ? act : outb, l == 0 ? G : -1, &m.dir_in);
     std::swap(x, y);
   }
   for (int c = 0; c < 3; ++c) out.rgb[size_t(c)] = sigmoid_lut_(x[c]);

@@ -7,9 +7,9 @@
 // units) and a fixed-point requantization multiplier (fx::Requant with
 // requant_multiplier_bits), as MlpArch::q8_bytes counts; plus the input-stage
 // multipliers of the two nets: one per feature channel (interpolated feature
-// to the density net's INT8 input), one for the density outputs and one for
-// the direction encoding (to the colour net's INT8 input). With DenseQ's
-// meaning (weight = w_q * w_scale[row], input step in_scale):
+// to the density net's INT8 input), one for the density outputs (to the
+// colour net's INT8 input) and one for the direction partial sums (below).
+// With DenseQ's meaning (weight = w_q * w_scale[row], input step in_scale):
 //   acc       = bias + sum w_q x_q   (accumulator_bits, saturating each add)
 //   hidden    x'_q = sat(round(relu(acc) * w_scale in_scale / in_scale_next))
 //   outputs   raw  = sat(round(acc * w_scale in_scale * 2^out_frac)), mlp_output_bits
@@ -17,6 +17,14 @@
 // delta): delta is constant, so one table on the raw density), the raw
 // colours through the sigmoid LUT. The MLP cache holds one MLP: switching to
 // another coarse voxel's MLP is one load.
+//
+// The direction encoding (|d| <= 1) does not share the colour net's input
+// step, which the density outputs set (|x| up to tens): it enters as INT8
+// with its own fixed step 1 / (2^(activation_bits-1) - 1), and the first
+// colour layer sums its direction products apart, then brings that partial
+// sum to accumulator units with the MLP's multiplier dir_in
+// (= direction step / in_scale) before adding it: one more requantization per
+// first-layer neuron, and the direction keeps 8 bits of resolution.
 #include <array>
 #include <cstdint>
 #include <vector>
@@ -40,7 +48,7 @@ struct TmeMlp {
   std::vector<TmeLayer> density, color;
   std::vector<fx::Requant> feature_in;  // F: interpolated feature -> density net input
   fx::Requant geo_in;                   // raw density-net output -> colour net input
-  fx::Requant dir_in;                   // direction code -> colour net input
+  fx::Requant dir_in;                   // first colour layer: direction partial sum -> accumulator units
   size_t stored_bytes = 0;              // q8_bytes + 4 bytes per input-stage multiplier
 };
 
@@ -89,12 +97,16 @@ class Tme {
   const TmeCounters& counters() const { return counters_; }
 
  private:
-  void layer(const TmeLayer& L, const int32_t* x, int32_t* y, bool hidden, int out_bits);
+  // split >= 0: inputs from `split` on are direction inputs, summed apart and
+  // brought to accumulator units by split_q.
+  void layer(const TmeLayer& L, const int32_t* x, int32_t* y, bool hidden, int out_bits, int split = -1,
+             const fx::Requant* split_q = nullptr);
 
   const SceneModel& model_;
   ChipNumerics n_;
   std::vector<TmeMlp> mlps_;
   ActivationLut alpha_lut_, sigmoid_lut_;
+  fx::Requant dir_code_;  // direction code -> INT8 direction input (step 1 / (2^(activation_bits-1) - 1))
   int32_t current_ = -1;
   TmeCounters counters_;
 };

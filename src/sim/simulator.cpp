@@ -275,6 +275,8 @@ class Engine {
           macs += uint64_t(L.in) * uint64_t(L.out);
           neurons += uint64_t(L.out);
         }
+      // The first colour layer also requantizes its direction partial sums.
+      if (!arithmetic_.tme().mlp(0).color.empty()) neurons += uint64_t(arithmetic_.tme().mlp(0).color.front().out);
     }
     macs_per_sample_ = macs;
     neurons_per_sample_ = neurons;

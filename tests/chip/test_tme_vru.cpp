@@ -110,13 +110,31 @@ TEST(Tme, EvaluatesTheIntegerMlpByHand) {
   EXPECT_EQ(dir, (std::vector<int32_t>{16384, 0, 0}));
   const TmeOutput out = tme.eval(feature, dir);
   EXPECT_EQ(out.raw_density, 256);  // 1.0
-  // Colour inputs (step 1/16): geo 16, -8; direction 16, 0, 0.
-  // rgb0 = 1.0, rgb1 = -1.0, rgb2 = 0.5 + 1 = 1.5.
+  // Colour inputs: geo 16, -8 (step 1/16); direction 127, 0, 0 (its own step
+  // 1/127), whose partial sum -64 * 127 becomes -1024 accumulator units
+  // (x 16/127). rgb0 = 1.0, rgb1 = -1.0, rgb2 = 0.5 + 1 = 1.5.
   EXPECT_NEAR(double(out.rgb[0]), 32768 / (1 + std::exp(-1.0)), 1.0);
   EXPECT_NEAR(double(out.rgb[1]), 32768 / (1 + std::exp(1.0)), 1.0);
   EXPECT_NEAR(double(out.rgb[2]), 32768 / (1 + std::exp(-1.5)), 1.0);
   EXPECT_NEAR(double(out.alpha), 32768 * (1 - std::exp(-std::exp(1.0) * delta)), 1.0);
   EXPECT_EQ(tme.counters().macs, 2u * 2u + 5u * 3u);
+}
+
+// The direction keeps its own input step: with a coarse colour-net input step
+// (1/4, as large density outputs give), a direction component of 0.3 still
+// reaches the colour to within the INT8 direction step (1/127), where sharing
+// the step would have made it 0.25.
+TEST(Tme, DirectionKeepsItsOwnInputStep) {
+  SceneModel m = tiny_mlp_model();
+  m.mlps_q8[0].color[0].in_scale = 0.25f;
+  Tme tme(m, ChipNumerics{}, 0.1, 8448);
+  tme.load(0);
+  const int32_t feature[2] = {512, -256};
+  const double dx = 0.3, dz = std::sqrt(1 - dx * dx);
+  const TmeOutput out = tme.eval(feature, Tme::encode_direction({dx, 0, dz}, 0, ChipNumerics{}));
+  EXPECT_NEAR(double(out.rgb[0]), 32768 / (1 + std::exp(-1.0)), 1.0);
+  EXPECT_NEAR(double(out.rgb[1]), 32768 / (1 + std::exp(dx)), 32768 * 0.25 / 127);
+  EXPECT_NEAR(double(out.rgb[2]), 32768 / (1 + std::exp(-1.5)), 1.0);
 }
 
 TEST(Tme, RefusesMlpsTheChipCannotHold) {
