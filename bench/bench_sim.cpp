@@ -1,13 +1,18 @@
 // Host speed of the cycle simulator: one frame of the procedural "several"
 // scene (micro resolution 256, as `edrnr make-scene several`) through
 // simulate_chip, at 200x200 and 800x800, on one and two threads; and the
-// memory system's cost per core cycle. docs/simulator.md lists the figures.
+// memory system's cost per core cycle; and the bundled lego model
+// (assets/default.edrnr) from its first test view, the host-speed target's
+// workload. docs/simulator.md lists the figures.
 //
-//   bench_sim --benchmark_filter=Frame/800    # the 60 s target
+//   bench_sim --benchmark_filter=Frame/800    # the procedural scene, 800x800
+//   bench_sim --benchmark_filter=Lego         # the 60 s target (needs ../shared/data)
 #include <benchmark/benchmark.h>
 
 #include <filesystem>
 
+#include "data/dataset.h"
+#include "model/model_io.h"
 #include "model/procedural.h"
 #include "render/cameras.h"
 #include "sim/memory_system.h"
@@ -58,6 +63,29 @@ BENCHMARK(BM_SimulateFrame)
     ->Iterations(1)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
+
+// The bundled lego model, test view 0 of the dataset beside the source tree,
+// 800x800; skipped when the model or the dataset is missing.
+void BM_SimulateLego(benchmark::State& state) {
+  const std::filesystem::path model = kSource / "assets/default.edrnr";
+  const std::filesystem::path data = kSource.parent_path() / "shared/data/nerf_synthetic/lego";
+  if (!std::filesystem::exists(model) || !std::filesystem::exists(data / "transforms_test.json")) {
+    state.SkipWithError("needs assets/default.edrnr and ../shared/data/nerf_synthetic/lego");
+    return;
+  }
+  const SceneModel m = load_model(model);
+  DatasetOptions d;
+  d.split = "test";
+  d.load_images = false;
+  const Camera cam = load_dataset(data, d).frames.at(0).camera;
+  sim::SimOptions opt;
+  opt.threads = int(state.range(0));
+  uint64_t cycles = 0;
+  for (auto _ : state) cycles += sim::simulate_chip(m, cam, preset(), opt).summary.cycles;
+  state.counters["sim_cycles_per_s"] = benchmark::Counter(double(cycles), benchmark::Counter::kIsRate);
+  state.counters["cycles_per_frame"] = double(cycles) / double(state.iterations());
+}
+BENCHMARK(BM_SimulateLego)->Arg(1)->Arg(2)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
 
 // The DRAM model behind the clock crossing, per core cycle: idle, and with a
 // 1000-byte feature block read started every 200 core cycles.
