@@ -68,11 +68,7 @@ std::vector<int> parse_views(const std::string& text, size_t count) {
 
 // The ground-truth image of a frame as load_dataset would give it.
 Image load_ground_truth(const Frame& f, int downscale_factor, const float background[3]) {
-  const Image rgba = read_png_rgba(f.image_path);
-  if (rgba.width != f.camera.width * downscale_factor || rgba.height != f.camera.height * downscale_factor)
-    fail("image '{}' is {}x{}, but its camera expects {}x{}", f.image_path.string(), rgba.width, rgba.height,
-         f.camera.width * downscale_factor, f.camera.height * downscale_factor);
-  return downscale(composite_rgba(rgba, background), downscale_factor);
+  return downscale(composite_rgba(read_frame_rgba(f, downscale_factor), background), downscale_factor);
 }
 
 void run_eval(const EvalOptions& o) {

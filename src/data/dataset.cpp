@@ -175,18 +175,27 @@ Camera parse_camera(const json& frame, const json& top, int frame_index, const s
 }
 
 Image load_frame_image(const Frame& frame, int frame_index, const DatasetOptions& options, const std::string& source) {
-  std::error_code ec;
-  if (!fs::is_regular_file(frame.image_path, ec))
-    fail("{}: image of frames[{}] not found: '{}'", source, frame_index, frame.image_path.string());
-  Image rgba = read_png_rgba(frame.image_path);
-  int expected_w = frame.camera.width * options.downscale, expected_h = frame.camera.height * options.downscale;
-  if (rgba.width != expected_w || rgba.height != expected_h)
-    fail("{}: image '{}' is {}x{}, but frames[{}] expects {}x{} (all images of a split must have the same size)",
-         source, frame.image_path.string(), rgba.width, rgba.height, frame_index, expected_w, expected_h);
+  Image rgba;
+  try {
+    rgba = read_frame_rgba(frame, options.downscale);
+  } catch (const Error& e) {
+    fail("{}: frames[{}]: {}", source, frame_index, e.what());
+  }
   return downscale(composite_rgba(rgba, options.background), options.downscale);
 }
 
 }  // namespace
+
+Image read_frame_rgba(const Frame& frame, int downscale) {
+  std::error_code ec;
+  if (!fs::is_regular_file(frame.image_path, ec)) fail("image not found: '{}'", frame.image_path.string());
+  Image rgba = read_png_rgba(frame.image_path);
+  const int expected_w = frame.camera.width * downscale, expected_h = frame.camera.height * downscale;
+  if (rgba.width != expected_w || rgba.height != expected_h)
+    fail("image '{}' is {}x{}, but its camera expects {}x{} (all images of a split must have the same size)",
+         frame.image_path.string(), rgba.width, rgba.height, expected_w, expected_h);
+  return rgba;
+}
 
 std::vector<Frame> parse_transforms(const std::string& json_text, const fs::path& base, const std::string& source,
                                     int downscale) {

@@ -37,6 +37,11 @@ struct Dataset {
 // or malformed file, a missing image or an image whose size does not match.
 Dataset load_dataset(const std::filesystem::path& root, const DatasetOptions& options);
 
+// The frame's image as RGBA at full size (before any downscale), checked
+// against its camera: the camera's size times `downscale`. Throws Error naming
+// the image when it is missing, unreadable or of another size.
+Image read_frame_rgba(const Frame& frame, int downscale);
+
 // Parses only the cameras of a transforms JSON text (for tests and tools);
 // `base` resolves relative image paths.
 std::vector<Frame> parse_transforms(const std::string& json_text, const std::filesystem::path& base,

@@ -13,10 +13,7 @@ void load_premultiplied_rgba(Dataset& data, int downscale_factor) {
   for (int i = 0; i < n; ++i) {
     try {
       Frame& f = data.frames[size_t(i)];
-      Image rgba = read_png_rgba(f.image_path);
-      if (rgba.width != f.camera.width * downscale_factor || rgba.height != f.camera.height * downscale_factor)
-        fail("image '{}' is {}x{}, but its camera expects {}x{}", f.image_path.string(), rgba.width, rgba.height,
-             f.camera.width * downscale_factor, f.camera.height * downscale_factor);
+      Image rgba = read_frame_rgba(f, downscale_factor);
       for (size_t p = 0; p < rgba.data.size(); p += 4)
         for (int c = 0; c < 3; ++c) rgba.data[p + size_t(c)] *= rgba.data[p + 3];
       f.image = downscale(rgba, downscale_factor);

@@ -900,11 +900,13 @@ struct Trainer::State {
     std::vector<float> values, m, v;
     const auto& old_index = blocks.fine_index();
     const int fr = R / kMicroPerFine;
+    auto fine_xyz = [fr](uint32_t fi) {
+      return Vec3i{int(fi % uint32_t(fr)), int((fi / uint32_t(fr)) % uint32_t(fr)), int(fi / uint32_t(fr * fr))};
+    };
     for (size_t bi = 0; bi < old_index.size(); ++bi) {
       const uint32_t fi = old_index[bi];
-      const int fx = int(fi % uint32_t(fr)), fy = int((fi / uint32_t(fr)) % uint32_t(fr)),
-                fz = int(fi / uint32_t(fr * fr));
-      if (!occ.fine.get(fx, fy, fz)) continue;
+      const Vec3i f = fine_xyz(fi);
+      if (!occ.fine.get(f.x, f.y, f.z)) continue;
       fine_index.push_back(fi);
       const size_t o = bi * kBlockVerts * F_, len = kBlockVerts * F_;
       values.insert(values.end(), blocks.values().begin() + ptrdiff_t(o), blocks.values().begin() + ptrdiff_t(o + len));
@@ -918,9 +920,8 @@ struct Trainer::State {
     const int cr = R / 32;
     std::vector<uint8_t> cv_used(size_t(cr) * cr * cr, 0);
     for (uint32_t fi : blocks.fine_index()) {
-      const int fx = int(fi % uint32_t(fr)), fy = int((fi / uint32_t(fr)) % uint32_t(fr)),
-                fz = int(fi / uint32_t(fr * fr));
-      cv_used[linear_index(fx / kFinePerCoarse, fy / kFinePerCoarse, fz / kFinePerCoarse, cr)] = 1;
+      const Vec3i f = fine_xyz(fi);
+      cv_used[linear_index(f.x / kFinePerCoarse, f.y / kFinePerCoarse, f.z / kFinePerCoarse, cr)] = 1;
     }
     const size_t P = layout.param_count;
     std::vector<uint32_t> new_cv;
