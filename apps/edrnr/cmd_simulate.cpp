@@ -35,7 +35,7 @@ struct SimulateOptions {
   std::string model, chip = "edr_nr_40nm", dataset, split = "test", disable, output, trace_window = "0:50000";
   int view = 0, width = 0, height = 0, threads = 1;
   double orbit = 30, elevation = 30, radius = 4, fov = 40, clock = 0;
-  bool all_points = false, quiet = false, table = false;
+  bool all_points = false, quiet = false, table = false, allow_over_budget = false, sram = false;
   CLI::Option *view_opt, *orbit_opt, *width_opt, *height_opt, *clock_opt, *elev_opt, *radius_opt, *fov_opt;
 };
 
@@ -176,6 +176,20 @@ void run_simulate(const SimulateOptions& o) {
   sim::validate(cfg);
   const View view = pick_view(o, cfg.chip);
   const SceneModel model = load_model(o.model);
+  // Table I's SRAM budget: a preset whose buffers do not fit is refused
+  // before any simulation, unless the user asks to go over (the report says so).
+  const sim::SramBudget budget = sim::sram_budget_for(model, cfg);
+  if (o.sram) std::cout << "SRAM budget of " << preset.filename().string() << " for " << o.model << "\n"
+                        << budget.format();
+  if (budget.over_budget()) {
+    std::string why;
+    for (const std::string& v : budget.violations()) why += "\n  " + v;
+    if (!o.allow_over_budget)
+      fail("chip preset '{}' does not fit Table I's on-chip SRAM:{}\n(--sram prints every buffer; "
+           "--allow-over-budget simulates it anyway)",
+           preset.string(), why);
+    fmt::print("WARNING     over Table I's SRAM budget (--allow-over-budget):{}\n", why);
+  }
 
   sim::SimOptions opt;
   opt.threads = o.threads;
@@ -241,6 +255,8 @@ void run_simulate(const SimulateOptions& o) {
     j["image"] = {{"width", r.image.width}, {"height", r.image.height}};
     j["stats"] = r.stats->to_json();
     j["hit_rate_series"] = r.hit_rate_series;
+    j["sram_budget"] = r.sram_budget.to_json();
+    j["sram_budget"]["allowed_over_budget"] = budget.over_budget();
     if (r.energy) j["energy"] = sim::energy_report_json(*r.energy);
     if (!points.empty()) j["operating_points"] = points;
     j["config_yaml"] = config_yaml.str();
@@ -283,6 +299,9 @@ void register_simulate_cmd(CLI::App& app) {
   cmd->add_option("--threads", o->threads, "1, or 2: the batch arithmetic on a second thread")->capture_default_str();
   cmd->add_flag("--all-points", o->all_points, "also simulate at each of Table I's five operating points");
   cmd->add_flag("--table", o->table, "also print every statistic (name, value, unit, description)");
+  cmd->add_flag("--sram", o->sram, "print every on-chip buffer's size against Table I's SRAM budget");
+  cmd->add_flag("--allow-over-budget", o->allow_over_budget,
+                "simulate a preset whose buffers exceed Table I's SRAM classes (the report is marked)");
   cmd->add_flag("-q,--quiet", o->quiet, "no progress line");
   cmd->callback([o] { run_simulate(*o); });
 }

@@ -86,8 +86,20 @@ ChipConfig chip_config_from_yaml(const YAML::Node& node, std::string_view where_
                  if (key == "functional_fill_latency_issues")
                    c.functional_fill_latency_issues = scalar<int>(v, at, "an integer");
                  if (key == "rp_rob")
-                   for_each_key(v, at, {"entries", "entry_depth", "recent_tags"},
+                   for_each_key(v, at, {"entries", "entry_depth", "recent_tags", "tag_switch", "switch_when"},
                                 [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                                  if (k == "switch_when") {
+                                    const std::string w = scalar<std::string>(x, a, "retired or idle");
+                                    if (w != "retired" && w != "idle")
+                                      fail("{}: '{}' is not retired or idle", a, w);
+                                    c.rp_rob.switch_when_idle = w == "idle";
+                                    return;
+                                  }
+                                  if (k == "tag_switch") {
+                                    c.rp_rob.tag_switch =
+                                        parse_tag_switch_rule(scalar<std::string>(x, a, "a name"), a);
+                                    return;
+                                  }
                                   int val = scalar<int>(x, a, "an integer");
                                   if (k == "entries") c.rp_rob.entries = val;
                                   if (k == "entry_depth") c.rp_rob.entry_depth = val;
@@ -151,6 +163,8 @@ YAML::Node chip_config_to_yaml(const ChipConfig& c) {
   n["rp_rob"]["entries"] = c.rp_rob.entries;
   n["rp_rob"]["entry_depth"] = c.rp_rob.entry_depth;
   n["rp_rob"]["recent_tags"] = c.rp_rob.recent_tags;
+  n["rp_rob"]["tag_switch"] = tag_switch_rule_name(c.rp_rob.tag_switch);
+  n["rp_rob"]["switch_when"] = c.rp_rob.switch_when_idle ? "idle" : "retired";
   n["ooo_queue_depth"] = c.ooo_queue_depth;
   n["feature_cache"]["bytes"] = c.feature_cache_bytes;
   n["feature_cache"]["mshr_entries"] = c.mshr_entries;
@@ -292,7 +306,8 @@ class FunctionalChip {
         buffer_(config.rp_buffer_capacity),
         ctu_(model, math_, config.switches.lag_first),
         rob_(RpRobConfig{config.rp_rob.entries, config.rp_rob.entry_depth, config.rp_rob.recent_tags,
-                         config.switches.rp_reorder}),
+                         config.switches.rp_reorder, config.rp_rob.tag_switch,
+                         config.rp_rob.switch_when_idle}),
         ftu_(model, math_, config.switches.lag_first, size_t(config.micro_grid_cache_bytes / 8)),
         ooo_(config.ooo_queue_depth, config.switches.ooo_issue),
         cfiu_(model, n_,

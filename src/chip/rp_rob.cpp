@@ -8,6 +8,14 @@
 
 namespace edrnr::chip {
 
+const char* tag_switch_rule_name(TagSwitchRule r) { return r == TagSwitchRule::Paper ? "paper" : "fullest"; }
+
+TagSwitchRule parse_tag_switch_rule(const std::string& text, const std::string& field) {
+  if (text == "paper") return TagSwitchRule::Paper;
+  if (text == "fullest") return TagSwitchRule::Fullest;
+  fail("{}: unknown tag-switch rule '{}' (known: paper, fullest)", field, text);
+}
+
 RpRob::RpRob(const RpRobConfig& config) : config_(config) {
   if (config.entries < 1) fail("RP-ROB entries must be at least 1 (got {})", config.entries);
   if (config.entry_depth < 1) fail("RP-ROB entry depth must be at least 1 (got {})", config.entry_depth);
@@ -98,14 +106,16 @@ std::optional<ScheduledRp> RpRob::schedule() {
       if (!en.ready.empty() && (best < 0 || en.count < entries_[size_t(best)].count)) best = e;
     }
     if (best >= 0) return pop(best);
-    if (any_placeholder) return std::nullopt;  // wait until they come back or retire
+    if (any_placeholder && !config_.switch_when_idle) return std::nullopt;  // wait until they come back or retire
   }
   // Tag switch.
   int hit = -1, other = -1;
   for (int e = 0; e < entries(); ++e) {
     const Entry& en = entries_[size_t(e)];
     if (en.ready.empty()) continue;
-    if (in_recent(en.tag)) {
+    if (config_.tag_switch == TagSwitchRule::Fullest) {
+      if (other < 0 || en.ready.size() > entries_[size_t(other)].ready.size()) other = e;
+    } else if (in_recent(en.tag)) {
       if (hit < 0 || en.count < entries_[size_t(hit)].count) hit = e;
     } else if (other < 0 || en.count > entries_[size_t(other)].count) {
       other = e;

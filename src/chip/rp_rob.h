@@ -24,7 +24,14 @@
 //                    holding the fewest CCRPs is served; with no recorder hit,
 //                    the entry holding the most CCRPs is served (an
 //                    assumption: most reuse per MLP load). Ties go to the
-//                    lowest entry index.
+//                    lowest entry index. This is the paper's rule
+//                    (TagSwitchRule::Paper); TagSwitchRule::Fullest ignores
+//                    the recorder and serves the entry holding the most ready
+//                    CCRPs (the most batches per MLP load). With
+//                    `switch_when_idle`, the tag also switches as soon as the
+//                    current tag has no ready CCRP left (its CCRPs in flight
+//                    come back to their entries and wait for the tag's next
+//                    turn), instead of waiting until they have all retired.
 //   reschedule(rp)   an in-flight CCRP goes back to its entry, ready (fine
 //                    voxel transition: more samples in the same CV).
 //   retire(rp)       an in-flight CCRP leaves (CV transition or termination);
@@ -35,16 +42,30 @@
 #include <cstdint>
 #include <deque>
 #include <optional>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
 namespace edrnr::chip {
 
+// How schedule() picks the next CV tag when the current one is done.
+enum class TagSwitchRule {
+  Paper,    // recent-tags recorder hits first, the fewest CCRPs among them (Section IV-D)
+  Fullest,  // the entry with the most ready CCRPs
+};
+// "paper", "fullest".
+const char* tag_switch_rule_name(TagSwitchRule r);
+// Parses a rule name; throws Error naming `field` and the accepted names.
+TagSwitchRule parse_tag_switch_rule(const std::string& text, const std::string& field);
+
 struct RpRobConfig {
-  int entries = 8;
-  int entry_depth = 16;
+  int entries = 16;
+  int entry_depth = 4;
   int recent_tags = 4;  // size of the LRU recent-tags recorder
   bool reorder = true;
+  TagSwitchRule tag_switch = TagSwitchRule::Paper;
+  bool switch_when_idle = true;  // false: the paper's literal rule (switch once the tag's CCRPs have all retired)
+  bool operator==(const RpRobConfig&) const = default;
 };
 
 struct RpRobCounters {

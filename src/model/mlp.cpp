@@ -46,8 +46,10 @@ float sigmoid(float x) { return 1.f / (1.f + std::exp(-x)); }
 MlpArch default_mlp_arch(int feature_channels) {
   MlpArch arch;
   arch.dir_frequencies = 2;
-  arch.density_widths = {feature_channels, 32, 16};
-  arch.color_widths = {16 + arch.dir_dims(), 32, 32, 3};
+  // The chip's MLP (docs/training.md, "MLP size"): 800 INT8 weights, 1216
+  // bytes as stored, so six fit the 8.25 KB MLP cache.
+  arch.density_widths = {feature_channels, 16, 8};
+  arch.color_widths = {8 + arch.dir_dims(), 16, 3};
   return arch;
 }
 

@@ -230,6 +230,16 @@ CacheOutcome Cache::access(uint64_t addr, uint64_t cycle) {
   return CacheOutcome::MissIssued;
 }
 
+CacheOutcome Cache::prefetch(uint64_t addr, uint64_t cycle) {
+  const uint64_t line = line_number(addr);
+  if (where_.count(line)) return CacheOutcome::Hit;
+  if (mshr_.outstanding(line)) return CacheOutcome::MissMerged;
+  if (mshr_.full()) return CacheOutcome::MissStalled;
+  mshr_.on_miss(line, cycle);
+  ++stats_.prefetches_issued;
+  return CacheOutcome::MissIssued;
+}
+
 bool Cache::access_and_fill(uint64_t addr, uint64_t cycle) {
   uint64_t line = line_number(addr);
   if (auto it = where_.find(line); it != where_.end()) {
@@ -339,6 +349,7 @@ void Cache::export_stats(StatsRegistry& registry, const std::string& prefix) con
   counter("fills", "lines", "lines allocated", stats_.fills);
   counter("evictions", "lines", "valid lines replaced by a fill", stats_.evictions);
   counter("fill_stalls", "attempts", "fills refused because every way of the set was reserved", stats_.fill_stalls);
+  counter("prefetches_issued", "lines", "prefetches that fetched a line from DRAM", stats_.prefetches_issued);
   counter("bank_access_cycles", "cycles", "cycles with at least one bank access", stats_.bank_access_cycles);
   counter("bank_accesses", "accesses", "bank accesses presented", stats_.bank_accesses);
   counter("bank_conflicts", "accesses", "accesses delayed behind another row of the same bank", stats_.bank_conflicts);

@@ -116,6 +116,7 @@ struct CacheStats {
   uint64_t fills = 0;
   uint64_t evictions = 0;
   uint64_t fill_stalls = 0;         // fill attempts refused: every way of the set reserved
+  uint64_t prefetches_issued = 0;   // prefetch() calls that opened an MSHR entry (a DRAM line request each)
   uint64_t bank_access_cycles = 0;  // present_cycle() calls with at least one access
   uint64_t bank_accesses = 0;
   uint64_t bank_conflicts = 0;
@@ -150,6 +151,12 @@ class Cache {
   // the replacement state.
   CacheOutcome access(uint64_t addr, uint64_t cycle);
 
+  // An uncounted request that brings `addr`'s line towards the cache ahead of
+  // use (counted only as a prefetch): Hit when resident (the replacement
+  // state is left alone), MissIssued when an MSHR entry opens (the caller
+  // sends the DRAM request, as for access), MissMerged when the line is
+  // already outstanding, MissStalled when the MSHR is full (try again later).
+  CacheOutcome prefetch(uint64_t addr, uint64_t cycle);
   // A counted request that, on a miss, fills the line at once without the MSHR
   // (for trace-driven hit-rate studies). Returns true on a hit. If every way of
   // the set is reserved the line is not allocated (a fill stall is counted).

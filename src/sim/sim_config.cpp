@@ -79,11 +79,13 @@ void read_timing(const YAML::Node& node, const std::string& where, SimTiming& t)
                                 });
                  if (key == "tme")
                    for_each_key(v, at,
-                                {"macs_per_cycle", "latency_cycles", "fifo_slots", "weight_load_bytes_per_cycle"},
+                                {"macs_per_cycle", "latency_cycles", "fifo_slots", "weight_load_bytes_per_cycle",
+                                 "weight_buffers"},
                                 [&](const std::string& k, const YAML::Node& x, const std::string& a) {
                                   if (k == "macs_per_cycle") t.tme_macs_per_cycle = integer(x, a);
                                   if (k == "latency_cycles") t.tme_latency_cycles = integer(x, a);
                                   if (k == "fifo_slots") t.tme_fifo_slots = integer(x, a);
+                                  if (k == "weight_buffers") t.tme_weight_buffers = integer(x, a);
                                   if (k == "weight_load_bytes_per_cycle")
                                     t.tme_weight_load_bytes_per_cycle = integer(x, a);
                                 });
@@ -141,12 +143,13 @@ void read_memory(const YAML::Node& node, const std::string& where, const fs::pat
                  const std::vector<fs::path>& search_dirs, SimMemory& m) {
   for_each_key(node, where,
                {"dram", "max_request_bytes", "preload_bitmaps", "write_output", "output_record_bytes",
-                "micro_grid_cache", "mlp_cache"},
+                "micro_grid_cache", "mlp_cache", "mlp_prefetch"},
                [&](const std::string& k, const YAML::Node& v, const std::string& at) {
                  if (k == "dram") read_dram(v, at, base_dir, search_dirs, m);
                  if (k == "max_request_bytes") m.max_request_bytes = uint32_t(count(v, at));
                  if (k == "preload_bitmaps") m.preload_bitmaps = boolean(v, at);
                  if (k == "write_output") m.write_output = boolean(v, at);
+                 if (k == "mlp_prefetch") m.mlp_prefetch = boolean(v, at);
                  if (k == "output_record_bytes") m.output_record_bytes = uint32_t(count(v, at));
                  if (k == "micro_grid_cache") read_cache(v, at, m.micro_grid_cache);
                  if (k == "mlp_cache") read_cache(v, at, m.mlp_cache);
@@ -160,14 +163,27 @@ void read_energy(const YAML::Node& node, const std::string& where, const fs::pat
                  if (k == "leakage") e.leakage_csv = resolve(scalar<std::string>(v, at, "a path"), base_dir);
                  if (k == "leakage_voltage_exponent") e.leakage_voltage_exponent = number(v, at);
                  if (k == "dram") {
-                   const std::string s = scalar<std::string>(v, at, "events or model");
+                   const std::string s = scalar<std::string>(v, at, "events, model or access");
                    if (s == "events")
                      e.dram = DramEnergySource::Events;
                    else if (s == "model")
                      e.dram = DramEnergySource::Model;
+                   else if (s == "access")
+                     e.dram = DramEnergySource::Access;
                    else
-                     fail("{}: '{}' is not events or model", at, s);
+                     fail("{}: '{}' is not events, model or access", at, s);
                  }
+               });
+}
+
+void read_sram_budget(const YAML::Node& node, const std::string& where, SramBudgetLimits& b) {
+  for_each_key(node, where, {"micro_grid", "feature", "mlp", "others"},
+               [&](const std::string& k, const YAML::Node& v, const std::string& at) {
+                 const uint64_t n = uint64_t(count(v, at));
+                 if (k == "micro_grid") b.micro_grid_bytes = n;
+                 if (k == "feature") b.feature_bytes = n;
+                 if (k == "mlp") b.mlp_bytes = n;
+                 if (k == "others") b.others_bytes = n;
                });
 }
 
@@ -217,6 +233,8 @@ void validate(const SimConfig& c) {
   at_least(t.tme_latency_cycles, 1, "tme.latency_cycles");
   at_least(t.tme_fifo_slots, 1, "tme.fifo_slots");
   at_least(t.tme_weight_load_bytes_per_cycle, 1, "tme.weight_load_bytes_per_cycle");
+  if (t.tme_weight_buffers < 1 || t.tme_weight_buffers > 2)
+    fail("simulator.timing.tme.weight_buffers {} must be 1 or 2", t.tme_weight_buffers);
   at_least(t.vru_cycles_per_sample, 1, "vru.cycles_per_sample");
   at_least(t.vru_latency_cycles, 1, "vru.latency_cycles");
   const SimMemory& m = c.memory;
@@ -266,13 +284,15 @@ SimConfig sim_config_from_yaml(const YAML::Node& node, std::string_view where_vi
   c.chip = chip_config_from_yaml(node, where);
   const YAML::Node s = node && node.IsMap() ? node["simulator"] : YAML::Node();
   if (s) {
-    for_each_key(s, where + ".simulator", {"clock_MHz", "timing", "memory", "energy", "operating_points", "statistics"},
+    for_each_key(s, where + ".simulator", {"clock_MHz", "timing", "memory", "energy", "operating_points", "statistics",
+                                                     "sram_budget_bytes"},
                  [&](const std::string& k, const YAML::Node& v, const std::string& at) {
                    if (k == "clock_MHz") c.clock_MHz = number(v, at);
                    if (k == "timing") read_timing(v, at, c.timing);
                    if (k == "memory") read_memory(v, at, base_dir, dram_search_dirs, c.memory);
                    if (k == "energy") read_energy(v, at, base_dir, c.energy);
                    if (k == "operating_points") read_operating_points(v, at, c.operating_points);
+                   if (k == "sram_budget_bytes") read_sram_budget(v, at, c.sram_budget);
                    if (k == "statistics")
                      for_each_key(v, at, {"hit_rate_window_cycles"},
                                   [&](const std::string&, const YAML::Node& x, const std::string& a) {
@@ -330,6 +350,7 @@ YAML::Node sim_config_to_yaml(const SimConfig& c) {
   timing["tme"]["latency_cycles"] = t.tme_latency_cycles;
   timing["tme"]["fifo_slots"] = t.tme_fifo_slots;
   timing["tme"]["weight_load_bytes_per_cycle"] = t.tme_weight_load_bytes_per_cycle;
+  timing["tme"]["weight_buffers"] = t.tme_weight_buffers;
   timing["vru"]["cycles_per_sample"] = t.vru_cycles_per_sample;
   timing["vru"]["latency_cycles"] = t.vru_latency_cycles;
   s["timing"] = timing;
@@ -340,6 +361,7 @@ YAML::Node sim_config_to_yaml(const SimConfig& c) {
   memory["max_request_bytes"] = m.max_request_bytes;
   memory["preload_bitmaps"] = m.preload_bitmaps;
   memory["write_output"] = m.write_output;
+  memory["mlp_prefetch"] = m.mlp_prefetch;
   memory["output_record_bytes"] = m.output_record_bytes;
   auto cache = [](const SimCacheConfig& x) {
     YAML::Node n;
@@ -359,7 +381,7 @@ YAML::Node sim_config_to_yaml(const SimConfig& c) {
   if (!c.energy.events_csv.empty()) energy["events"] = fs::absolute(c.energy.events_csv).lexically_normal().string();
   if (!c.energy.leakage_csv.empty()) energy["leakage"] = fs::absolute(c.energy.leakage_csv).lexically_normal().string();
   energy["leakage_voltage_exponent"] = c.energy.leakage_voltage_exponent;
-  energy["dram"] = c.energy.dram == DramEnergySource::Events ? "events" : "model";
+  energy["dram"] = dram_energy_source_name(c.energy.dram);
   s["energy"] = energy;
 
   YAML::Node points(YAML::NodeType::Sequence);
@@ -371,8 +393,21 @@ YAML::Node sim_config_to_yaml(const SimConfig& c) {
   }
   s["operating_points"] = points;
   s["statistics"]["hit_rate_window_cycles"] = c.hit_rate_window_cycles;
+  s["sram_budget_bytes"]["micro_grid"] = c.sram_budget.micro_grid_bytes;
+  s["sram_budget_bytes"]["feature"] = c.sram_budget.feature_bytes;
+  s["sram_budget_bytes"]["mlp"] = c.sram_budget.mlp_bytes;
+  s["sram_budget_bytes"]["others"] = c.sram_budget.others_bytes;
   root["simulator"] = s;
   return root;
+}
+
+const char* dram_energy_source_name(DramEnergySource s) {
+  switch (s) {
+    case DramEnergySource::Events: return "events";
+    case DramEnergySource::Model: return "model";
+    case DramEnergySource::Access: return "access";
+  }
+  return "?";
 }
 
 OperatingPoint operating_point_at(const SimConfig& c, double clock_MHz, bool* extrapolated) {

@@ -41,10 +41,14 @@ struct SimTiming {
   int cfiu_fifo_slots = 4;
   // TME: ceil(MACs per sample / macs_per_cycle) cycles per sample; a CV switch
   // copies the MLP into the MAC array at weight_load_bytes_per_cycle.
-  int tme_macs_per_cycle = 4096;
+  int tme_macs_per_cycle = 1024;
   int tme_latency_cycles = 12;
   int tme_fifo_slots = 4;
   int tme_weight_load_bytes_per_cycle = 64;
+  // 1: the array holds one MLP, a CV switch stops the TME; 2: a second
+  // (shadow) set of weight registers takes the next CV's MLP while the
+  // current samples finish.
+  int tme_weight_buffers = 1;
   // VRU: cycles per sample; the retire/reschedule decision follows the last
   // sample of a batch latency_cycles later.
   int vru_cycles_per_sample = 1;
@@ -73,18 +77,34 @@ struct SimMemory {
   uint32_t output_record_bytes = 16;
   SimCacheConfig micro_grid_cache{64, 4, Replacement::Lru, 1, 4, 1};
   SimCacheConfig mlp_cache{64, 0, Replacement::Lru, 1, 8, 1};
+  // When the RP-ROB switches to a new CV tag, the MLP cache starts fetching
+  // that CV's MLP lines (uncounted prefetches), so that the TME finds them on
+  // chip when the tag's first batch reaches it.
+  bool mlp_prefetch = false;
 };
 
 enum class DramEnergySource {
   Events,  // the energy table's dram_bit per bit moved (whole interface)
   Model,   // the DDR3 model's own current-based energy (DRAM core only)
+  Access,  // the DDR3 model's access energy (activates, reads, writes; no background or refresh)
+           // plus the table's dram_io_bit per bit moved
 };
+const char* dram_energy_source_name(DramEnergySource s);
 
 struct SimEnergy {
   std::filesystem::path events_csv;   // empty: no energy evaluation
   std::filesystem::path leakage_csv;  // empty: no leakage
   double leakage_voltage_exponent = 1.0;
-  DramEnergySource dram = DramEnergySource::Events;
+  DramEnergySource dram = DramEnergySource::Access;
+};
+
+// Table I's on-chip SRAM classes, in bytes (sim/sram_budget.h checks every
+// buffer against them).
+struct SramBudgetLimits {
+  uint64_t micro_grid_bytes = 8192;  // 8 KB
+  uint64_t feature_bytes = 262144;   // 256 KB
+  uint64_t mlp_bytes = 8448;         // 8.25 KB
+  uint64_t others_bytes = 44236;     // 43.2 KB
 };
 
 struct SimConfig {
@@ -95,6 +115,7 @@ struct SimConfig {
   SimEnergy energy;
   std::vector<OperatingPoint> operating_points;  // ascending frequency; the voltage at a clock comes from here
   uint64_t hit_rate_window_cycles = 20000;       // window of the hit-rate series (Fig. 8)
+  SramBudgetLimits sram_budget;
 };
 
 // Throws Error naming the field when a value is out of range.

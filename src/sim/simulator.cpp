@@ -232,7 +232,8 @@ class Engine {
         buffer_(config.chip.rp_buffer_capacity),
         ctu_(model, math_, config.chip.switches.lag_first),
         rob_(RpRobConfig{config.chip.rp_rob.entries, config.chip.rp_rob.entry_depth, config.chip.rp_rob.recent_tags,
-                         config.chip.switches.rp_reorder}),
+                         config.chip.switches.rp_reorder, config.chip.rp_rob.tag_switch,
+                         config.chip.rp_rob.switch_when_idle}),
         ftu_(model, math_, config.chip.switches.lag_first, size_t(config.chip.micro_grid_cache_bytes / 8)),
         ooo_(config.chip.ooo_queue_depth, config.chip.switches.ooo_issue),
         cfiu_(model, n_,
@@ -421,6 +422,7 @@ class Engine {
             st = UnitState::StallMemory;  // no MSHR entry or no line free
           } else {
             feature_series_.record(c, a == CacheAccess::Hit);
+            count_per_access(feature_access_, a == CacheAccess::Hit, batches_[s.slot].samples.size());
             if (a == CacheAccess::MissAllocated)
               mem_.read(DataType::Features, map_.feature_block(block), uint32_t(map_.feature_block_bytes), block, c);
             ooo_.push({s.rp, block, s.slot});
@@ -438,6 +440,7 @@ class Engine {
       if (free_slots_.empty()) {
         if (!rob_.empty()) st = UnitState::StallOutput;
       } else if (const auto sched = rob_.schedule()) {
+        if (cfg_.memory.mlp_prefetch && (!prefetch_started_ || sched->tag != prefetch_tag_)) start_mlp_prefetch(sched->tag);
         s.rp = sched->rp;
         s.slot = free_slots_.back();
         free_slots_.pop_back();
@@ -540,6 +543,7 @@ class Engine {
       f.sample_cycles.push_back(uint8_t(std::min(255, t_.cfiu_cycles_per_sample + conflicts)));
     }
     cfiu_s_ = {true, e.rp, 0, f.sample_cycles[0], cycle_ + 1};
+    early_mlp_load(f.cv_tag);
   }
 
   // CFIU: streams the issued batch's samples into the TME's queue.
@@ -569,12 +573,16 @@ class Engine {
     set_state(kCfiu, st);
   }
 
-  // TME: the MLP of the batch's CV must be in the MAC array; a switch copies
-  // it from the MLP cache, which fetches missing lines from DRAM.
+  // TME: the MLP of the batch's CV must be in the MAC array. A load copies it
+  // from the MLP cache (missing lines from DRAM) into a weight buffer. With one
+  // buffer the load starts when the batch reaches the head of the TME's queue
+  // and stops the TME; with two, it starts into the shadow buffer as soon as
+  // the OoO-SI issues the batch, and the buffers swap when the batch arrives.
   void step_tme() {
     const uint64_t c = cycle_;
     UnitState st = UnitState::Idle;
     TmeShell& s = tme_s_;
+    issue_mlp_prefetch(c);
     if (s.holding && s.left == 0) {
       if (vru_in_.can_push()) {
         vru_in_.push(s.token, c);
@@ -583,34 +591,33 @@ class Engine {
         st = UnitState::StallOutput;
       }
     }
-    if (!s.holding && !s.switching && tme_in_.can_pop(c)) {
+    bool waiting_for_weights = false;
+    if (!s.holding && tme_in_.can_pop(c)) {
       const SampleToken& next = tme_in_.front();
       const uint32_t tag = flights_[next.rp].cv_tag;
-      if (next.first && (!s.loaded || s.loaded_tag != tag)) {
-        s.switching = true;
-        s.switch_tag = tag;
-        s.switch_end = c + ceil_div(mlp_bytes_, uint64_t(t_.tme_weight_load_bytes_per_cycle));
-        s.next_line = 0;
-        s.waiting.clear();
-        const uint32_t mlp = uint32_t(model_.coarse_to_mlp[tag]);
-        s.lines.clear();
-        bool on_chip = true;
-        for (uint64_t i = 0; i < mlp_lines_; ++i) {
-          s.lines.push_back(map_.mlp(mlp) + i * cfg_.memory.mlp_cache.line_bytes);
-          on_chip = on_chip && mlp_cache_.lookup(s.lines.back());
+      bool ready = true;
+      if (next.first && (!s.active || s.active_tag != tag)) {
+        if (s.shadow_ready && s.shadow_tag == tag) {
+          s.active = true;  // swap: the loaded buffer becomes the active one
+          s.active_tag = tag;
+          s.shadow_ready = false;
+          count_mlp_batch(next, s.shadow_on_chip);
+        } else {
+          if (!s.loading) start_mlp_load(tag, c);
+          ready = false;  // wait for the load (of this tag, or the one under way)
         }
-        mlp_series_.record(c, on_chip);
-        s.switched = true;
-        ++mlp_switches_;
-      } else {
-        if (next.first && !s.switched) mlp_series_.record(c, true);  // its MLP is in the MAC array
-        s.switched = false;
+      } else if (next.first) {
+        count_mlp_batch(next, true);  // its MLP is in the MAC array
+      }
+      if (ready) {
         s.token = tme_in_.pop(c);
         s.holding = true;
         s.left = tme_cycles_per_sample_;
+      } else {
+        waiting_for_weights = true;
       }
     }
-    if (s.switching) {
+    if (s.loading) {
       while (s.next_line < s.lines.size()) {
         const uint64_t addr = s.lines[s.next_line];
         const CacheOutcome o = mlp_cache_.access(addr, c);
@@ -624,12 +631,13 @@ class Engine {
         ++s.next_line;
       }
       const bool arrived = take_arrived(mlp_cache_, s.waiting);
-      if (arrived && s.next_line == s.lines.size() && c + 1 >= s.switch_end) {
-        s.switching = false;
-        s.loaded = true;
-        s.loaded_tag = s.switch_tag;
+      if (arrived && s.next_line == s.lines.size() && c + 1 >= s.load_end) {
+        s.loading = false;
+        s.shadow_ready = true;
+        s.shadow_tag = s.load_tag;
+        s.shadow_on_chip = s.load_on_chip;
       }
-      st = c < s.switch_end ? UnitState::Busy : UnitState::StallMemory;
+      if (waiting_for_weights) st = c < s.load_end ? UnitState::Busy : UnitState::StallMemory;
     }
     if (s.holding && s.left > 0) {
       --s.left;
@@ -640,6 +648,42 @@ class Engine {
       }
     }
     set_state(kTme, st);
+  }
+
+  // Starts copying the MLP of CV `tag` into the free weight buffer.
+  void start_mlp_load(uint32_t tag, uint64_t c) {
+    TmeShell& s = tme_s_;
+    if (t_.tme_weight_buffers == 1) s.active = false;  // the single buffer is overwritten
+    s.loading = true;
+    s.shadow_ready = false;
+    s.load_tag = tag;
+    s.load_end = c + ceil_div(mlp_bytes_, uint64_t(t_.tme_weight_load_bytes_per_cycle));
+    s.next_line = 0;
+    s.waiting.clear();
+    const uint32_t mlp = uint32_t(model_.coarse_to_mlp[tag]);
+    s.lines.clear();
+    bool on_chip = true;
+    for (uint64_t i = 0; i < mlp_lines_; ++i) {
+      s.lines.push_back(map_.mlp(mlp) + i * cfg_.memory.mlp_cache.line_bytes);
+      on_chip = on_chip && mlp_cache_.lookup(s.lines.back());
+    }
+    s.load_on_chip = on_chip;
+    ++mlp_switches_;
+  }
+
+  // With a shadow buffer: the OoO-SI issued a batch of CV `tag`; load its MLP
+  // now unless it is active, loaded, or the shadow buffer is taken.
+  void early_mlp_load(uint32_t tag) {
+    TmeShell& s = tme_s_;
+    if (t_.tme_weight_buffers < 2 || s.loading || s.shadow_ready) return;
+    if (s.active && s.active_tag == tag) return;
+    start_mlp_load(tag, cycle_);
+  }
+
+  // A batch reaching the TME: the per-batch and per-access MLP hit rates.
+  void count_mlp_batch(const SampleToken& first, bool on_chip) {
+    mlp_series_.record(cycle_, on_chip);
+    count_per_access(mlp_access_, on_chip, flights_[first.rp].coords.size());
   }
 
   // VRU: composites one sample per vru_cycles_per_sample; after a batch's last
@@ -706,6 +750,38 @@ class Engine {
   void write_output_record(uint64_t sequence) {
     if (cfg_.memory.write_output)
       mem_.write(DataType::RpOutput, map_.output_record(sequence), uint32_t(map_.output_record_bytes), cycle_);
+  }
+
+  // The RP-ROB switched to `tag`: its MLP's lines are fetched ahead of the TME.
+  void start_mlp_prefetch(uint32_t tag) {
+    prefetch_started_ = true;
+    prefetch_tag_ = tag;
+    prefetch_lines_.clear();
+    prefetch_next_ = 0;
+    const int32_t mlp = model_.coarse_to_mlp[tag];
+    if (mlp < 0) return;
+    for (uint64_t i = 0; i < mlp_lines_; ++i)
+      prefetch_lines_.push_back(map_.mlp(uint32_t(mlp)) + i * cfg_.memory.mlp_cache.line_bytes);
+  }
+
+  // One prefetch request per cycle, while MSHR entries are free.
+  void issue_mlp_prefetch(uint64_t c) {
+    if (prefetch_next_ >= prefetch_lines_.size()) return;
+    const uint64_t addr = prefetch_lines_[prefetch_next_];
+    const CacheOutcome o = mlp_cache_.prefetch(addr, c);
+    if (o == CacheOutcome::MissStalled) return;
+    if (o == CacheOutcome::MissIssued)
+      mem_.read(DataType::MlpWeights, addr, uint32_t(cfg_.memory.mlp_cache.line_bytes), addr, c);
+    ++prefetch_next_;
+  }
+
+  struct AccessCount {
+    uint64_t hits = 0, misses = 0;
+  };
+  static void count_per_access(AccessCount& a, bool hit, size_t samples) {
+    if (samples == 0) return;
+    a.hits += hit ? samples : samples - 1;
+    a.misses += hit ? 0 : 1;
   }
 
   // ------------------------------------------------------------ memory
@@ -825,15 +901,24 @@ class Engine {
                            ceil_div(c.ftu.samples, 2);
     e["other_sram_write"] = (uint64_t(zorg_.packet_count()) + ctu_runs_ + ftu_runs_) * kRpTraversalStateWords +
                             c.vru.samples + ceil_div(c.ftu.samples, 2);
+    // Clock distribution, control and pipeline registers, which the
+    // per-operation rows leave out: one event per core cycle (its energy is
+    // fitted, docs/energy.md).
+    e["core_cycle"] = cycles_;
     // Registers: the MLP copied into the MAC array; each sample's interpolated
     // feature (CFIU -> TME) and its alpha and colour (TME -> VRU).
     e["register_bit"] = mlp_switches_ * mlp_bytes_ * 8 +
                         c.cfiu.samples * (F * uint64_t(n_.interp_feature_bits) + 4 * uint64_t(n_.alpha_bits));
     const uint64_t dram_bytes = uint64_t(stats_.get("dram.read_bytes")) + uint64_t(stats_.get("dram.write_bytes"));
-    if (cfg_.energy.dram == DramEnergySource::Events)
+    if (cfg_.energy.dram == DramEnergySource::Events) {
       e["dram_bit"] = dram_bytes * 8;
-    else
+    } else if (cfg_.energy.dram == DramEnergySource::Model) {
       run.dram_model_energy_pJ = mem_.dram().energy().total_pJ();
+    } else {
+      const DramEnergy d = mem_.dram().energy();
+      run.dram_model_energy_pJ = d.activate_pJ + d.read_pJ + d.write_pJ;
+      e["dram_io_bit"] = dram_bytes * 8;
+    }
     return run;
   }
 
@@ -860,6 +945,9 @@ class Engine {
     uint64_t mhits = 0, maccesses = 0;
     for (const HitRateWindow& w : mlp_series_.series()) mhits += w.hits, maccesses += w.accesses;
     s.mlp_hit_rate = ratio(double(mhits), double(maccesses));
+    s.feature_hit_rate_per_access =
+        ratio(double(feature_access_.hits), double(feature_access_.hits + feature_access_.misses));
+    s.mlp_hit_rate_per_access = ratio(double(mlp_access_.hits), double(mlp_access_.hits + mlp_access_.misses));
     s.dram_read_bytes = uint64_t(stats_.get("dram.read_bytes"));
     s.dram_write_bytes = uint64_t(stats_.get("dram.write_bytes"));
     s.coarse_rays_per_iteration = cc.coarse_rays_per_iteration();
@@ -918,6 +1006,21 @@ class Engine {
     cnt("cache.mlp.batches", "batches", "batches reaching the TME", maccesses);
     cnt("cache.mlp.batch_hits", "batches", "batches whose MLP was on chip (in the MAC array or the MLP cache)", mhits);
     val("cache.mlp.hit_rate", "ratio", "batch_hits / batches (the MLP hit rate of the report)", s.mlp_hit_rate);
+    for (auto [name, a] : {std::pair{"features", feature_access_}, std::pair{"mlp", mlp_access_}}) {
+      const std::string p = std::string("cache.") + name + ".per_access.";
+      cnt(p + "accesses", "samples", "samples reading the data (a missed batch: its first sample misses)",
+          a.hits + a.misses);
+      cnt(p + "hits", "samples", "samples that found the data on chip", a.hits);
+      cnt(p + "misses", "samples", "samples that waited for it", a.misses);
+      val(p + "hit_rate", "ratio", "hits / accesses, per sample (the paper's Fig. 8 counts per access)",
+          ratio(double(a.hits), double(a.hits + a.misses)));
+    }
+    res_.sram_budget = compute_sram_budget(cfg_, {model_.micro_res, model_.feature_channels, mlp_bytes_});
+    for (const SramBuffer& b : res_.sram_budget.buffers)
+      cnt("sram." + b.name + "_bytes", "bytes", "on-chip buffer size (docs/simulator.md, SRAM budget)", b.bytes);
+    for (int k = 0; k < kSramClasses; ++k)
+      cnt(std::string("sram.class.") + sram_class_name(SramClass(k)) + "_bytes", "bytes",
+          "buffers of this Table I class", res_.sram_budget.class_bytes[k]);
     cnt("cache.features.bank_reads", "reads", "vertex vectors read from the 8 banks", cc.cfiu.corner_reads);
     cnt("cache.features.bank_conflict_cycles", "cycles", "extra CFIU cycles from two corners in one bank",
         cc.cfiu.conflict_cycles);
@@ -973,12 +1076,15 @@ class Engine {
     bool holding = false;
     SampleToken token;
     uint64_t left = 0;
-    bool loaded = false;
-    uint32_t loaded_tag = 0;
-    bool switching = false;
-    bool switched = false;  // the token at the head of the queue caused the last switch
-    uint32_t switch_tag = 0;
-    uint64_t switch_end = 0;
+    bool active = false;  // the active weight buffer holds active_tag's MLP
+    uint32_t active_tag = 0;
+    bool shadow_ready = false;  // a finished load waits to become active
+    uint32_t shadow_tag = 0;
+    bool shadow_on_chip = false;
+    bool loading = false;  // a load into the free buffer is under way
+    uint32_t load_tag = 0;
+    bool load_on_chip = false;  // its lines were all in the MLP cache when it started
+    uint64_t load_end = 0;
     std::vector<uint64_t> lines;
     size_t next_line = 0;
     std::vector<uint64_t> waiting;
@@ -1044,6 +1150,11 @@ class Engine {
   uint64_t rps_done_ = 0, packets_dropped_ = 0, rps_finished_ = 0, cv_transitions_ = 0, fine_reschedules_ = 0;
   uint64_t ctu_runs_ = 0, ftu_runs_ = 0, mlp_switches_ = 0, feature_fills_ = 0;
   uint64_t fill_words_micro_ = 0, fill_words_mlp_ = 0;
+  bool prefetch_started_ = false;
+  uint32_t prefetch_tag_ = 0;
+  std::vector<uint64_t> prefetch_lines_;
+  size_t prefetch_next_ = 0;
+  AccessCount feature_access_, mlp_access_;
 };
 
 }  // namespace
@@ -1054,6 +1165,17 @@ EnergyReport evaluate_energy(const SimConfig& config, const EnergyRun& run, cons
                     config.energy.leakage_csv.empty() ? LeakageTable{} : LeakageTable::load(config.energy.leakage_csv),
                     config.energy.leakage_voltage_exponent);
   return model.evaluate(run, point);
+}
+
+SramBudget sram_budget_for(const SceneModel& model, const SimConfig& config) {
+  check_chip_model(model);
+  uint64_t mlp_bytes = 0;
+  if (model.mlp_count()) {
+    const double delta = double(config.chip.step_micro) * double(model.scene_box.size().x) / double(model.micro_res);
+    Tme tme(model, config.chip.numerics, delta, size_t(config.chip.mlp_cache_bytes));
+    mlp_bytes = tme.mlp(0).stored_bytes;
+  }
+  return compute_sram_budget(config, {model.micro_res, model.feature_channels, mlp_bytes});
 }
 
 SimResult simulate_chip(const SceneModel& model, const Camera& camera, const SimConfig& config,
@@ -1099,6 +1221,17 @@ std::string format_sim_report(const SimResult& r) {
       "(paper 96.38); bank conflict cycles {}\n",
       100 * s.micro_grid_hit_rate, 100 * s.feature_hit_rate, 100 * s.mlp_hit_rate,
       uint64_t(st.get("cache.features.bank_conflict_cycles")));
+  o << fmt::format("            per access (sample): features {:.2f} %, MLP {:.2f} %\n",
+                   100 * s.feature_hit_rate_per_access, 100 * s.mlp_hit_rate_per_access);
+  {
+    const SramBudget& b = r.sram_budget;
+    o << "SRAM        ";
+    for (int k = 0; k < kSramClasses; ++k)
+      o << fmt::format("{}{} {:.1f} of {:.1f} KB{}", k ? ", " : "", sram_class_name(SramClass(k)),
+                       double(b.class_bytes[k]) / 1024, double(b.class_budget[k]) / 1024,
+                       b.class_bytes[k] > b.class_budget[k] ? " (OVER)" : "");
+    o << "\n";
+  }
   o << "memory      read bytes   writes bytes  (as requested, by data type)\n";
   for (int t = 0; t < kDataTypes; ++t) {
     const std::string p = std::string("mem.") + data_type_name(DataType(t));

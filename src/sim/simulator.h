@@ -39,6 +39,7 @@
 #include "model/scene_model.h"
 #include "sim/energy.h"
 #include "sim/sim_config.h"
+#include "sim/sram_budget.h"
 
 namespace edrnr::sim {
 
@@ -77,6 +78,11 @@ struct SimSummary {
   double micro_grid_hit_rate = 0;     // micro-grid word reads that hit
   double feature_hit_rate = 0;        // feature block requests (one per batch) that hit
   double mlp_hit_rate = 0;            // batches at the TME whose MLP was on chip (MAC array or MLP cache)
+  // Per access (per sample), as a cache serving samples one by one would
+  // count them: a batch that hits is n hits; one that misses is one miss (its
+  // first sample waits for the data) and n - 1 hits.
+  double feature_hit_rate_per_access = 0;
+  double mlp_hit_rate_per_access = 0;
   uint64_t dram_read_bytes = 0;       // bursts moved, as the DRAM counts them
   uint64_t dram_write_bytes = 0;
   double coarse_rays_per_iteration = 0;
@@ -97,10 +103,16 @@ struct SimResult {
   EnergyRun energy_run;                // event counts, to evaluate at any operating point
   std::optional<EnergyReport> energy;  // at the configured clock's operating point
   bool voltage_extrapolated = false;   // the clock is above every operating point
+  SramBudget sram_budget;              // the config's buffers for this model, against Table I
 };
+
+// The SRAM budget of `config` for `model`'s shape (micro grid, channels, MLP).
+SramBudget sram_budget_for(const SceneModel& model, const SimConfig& config);
 
 // Simulates one frame. Throws Error for a bad config, camera or model (as
 // render_chip does), and std::logic_error for an internal fault (a deadlock).
+// The SRAM budget is computed (SimResult::sram_budget) but not enforced: the
+// caller decides (edrnr simulate refuses a preset over budget).
 SimResult simulate_chip(const SceneModel& model, const Camera& camera, const SimConfig& config,
                         const SimOptions& options = {});
 

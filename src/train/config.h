@@ -16,9 +16,9 @@ struct TrainConfig {
   Box3f scene_box{{-1.5f, -1.5f, -1.5f}, {1.5f, 1.5f, 1.5f}};  // must be a cube
   int micro_res = 256;                                         // Rm, a multiple of 32
   std::vector<int> levels{32, 64, 128, 256};                   // feature pyramid resolutions (4 channels each)
-  std::vector<int> density_hidden{32};                         // density net hidden widths
-  int geo_features = 16;                                       // density net outputs (G)
-  std::vector<int> color_hidden{32, 32};                       // colour net hidden widths
+  std::vector<int> density_hidden{16};                         // density net hidden widths
+  int geo_features = 8;                                        // density net outputs (G)
+  std::vector<int> color_hidden{16};                           // colour net hidden widths
   int dir_frequencies = 2;                                     // L
   float step_micro = 1.f;                                      // sample spacing in micro voxels (as the renderer)
   float transmittance_min = 1e-4f;                             // early termination (as the renderer)

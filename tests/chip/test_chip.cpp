@@ -187,7 +187,7 @@ TEST(ChipConfig, DefaultPresetIsTheBuiltInDefault) {
   EXPECT_EQ(c.rp_buffer_capacity, d.rp_buffer_capacity);
   EXPECT_EQ(c.rp_rob.entries, d.rp_rob.entries);
   EXPECT_EQ(c.rp_rob.entry_depth, d.rp_rob.entry_depth);
-  EXPECT_EQ(c.rp_rob.recent_tags, d.rp_rob.recent_tags);
+  EXPECT_EQ(c.rp_rob, d.rp_rob);
   EXPECT_EQ(c.ooo_queue_depth, d.ooo_queue_depth);
   EXPECT_EQ(c.feature_cache_bytes, 262144);
   EXPECT_EQ(c.mlp_cache_bytes, 8448);

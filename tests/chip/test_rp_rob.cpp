@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+
 #include <stdexcept>
+#include <string>
 
 #include "chip/rp_rob.h"
 #include "core/error.h"
@@ -33,7 +35,8 @@ TEST(RpRob, InsertLabelsEntriesDynamicallyAndRefusesWhenFull) {
 }
 
 TEST(RpRob, ScheduleRescheduleRetireSequence) {
-  RpRob rob({.entries = 3, .entry_depth = 2, .recent_tags = 2, .reorder = true});
+  // The paper's literal rule: a tag switches once all its CCRPs have retired.
+  RpRob rob({.entries = 3, .entry_depth = 2, .recent_tags = 2, .reorder = true, .switch_when_idle = false});
   for (auto [rp, tag] : {std::pair{10u, A}, {11u, A}, {12u, A}, {13u, B}, {15u, A}}) ASSERT_TRUE(rob.insert(rp, tag));
   // Tag switch: every tag is recent; the entry with the fewest CCRPs (B, 1) wins.
   auto s = rob.schedule();
@@ -102,6 +105,63 @@ TEST(RpRob, RecentTagsRecorderIsLruAndSteersTagSwitches) {
     // With the recorder: B (recent). Without: the entry holding the most CCRPs.
     EXPECT_EQ(rob.schedule()->tag, recorder ? B : A);
     EXPECT_EQ(rob.counters().recorder_hits, recorder);
+  }
+}
+
+TEST(RpRob, TagSwitchRulesOnAHandMadeSequence) {
+  // Entries: A holds 3 ready CCRPs, B 1, C 2; the recorder (2 tags) ends as
+  // {C, B}. The paper's rule prefers recorder hits and, among them, the entry
+  // with the fewest CCRPs: B. "fullest" ignores the recorder: A.
+  auto fill = [](RpRob& rob) {
+    rob.insert(1, A);
+    rob.insert(2, A);
+    rob.insert(3, A);
+    rob.insert(4, B);
+    rob.insert(5, C);
+    rob.insert(6, C);
+  };
+  RpRob paper({.entries = 4, .entry_depth = 4, .recent_tags = 2, .reorder = true, .tag_switch = TagSwitchRule::Paper});
+  fill(paper);
+  EXPECT_EQ(paper.recent_tags(), (std::deque<uint32_t>{C, B}));
+  EXPECT_EQ(paper.schedule()->tag, B);
+  RpRob fullest({.entries = 4,
+                 .entry_depth = 4,
+                 .recent_tags = 2,
+                 .reorder = true,
+                 .tag_switch = TagSwitchRule::Fullest,
+                 .switch_when_idle = false});
+  fill(fullest);
+  const auto first = fullest.schedule();
+  EXPECT_EQ(first->tag, A);
+  EXPECT_EQ(fullest.counters().recorder_hits, 0u);
+  // It stays on A while A has ready CCRPs, then switches to the fuller of B and C.
+  EXPECT_EQ(fullest.schedule()->tag, A);
+  EXPECT_EQ(fullest.schedule()->tag, A);
+  EXPECT_FALSE(fullest.schedule());  // A's CCRPs are in flight: wait
+  for (uint32_t rp : {1u, 2u, 3u}) fullest.retire(rp);
+  EXPECT_EQ(fullest.schedule()->tag, C);
+  EXPECT_EQ(std::string(tag_switch_rule_name(TagSwitchRule::Fullest)), "fullest");
+  EXPECT_EQ(parse_tag_switch_rule("paper", "x"), TagSwitchRule::Paper);
+  EXPECT_THROW(parse_tag_switch_rule("lru", "rp_rob.tag_switch"), Error);
+}
+
+TEST(RpRob, SwitchWhenIdleLeavesATagWhoseCcrpsAreAllInFlight) {
+  for (bool idle : {false, true}) {
+    RpRob rob({.entries = 3, .entry_depth = 4, .recent_tags = 0, .reorder = true, .switch_when_idle = idle});
+    rob.insert(1, A);
+    rob.insert(2, A);
+    rob.insert(3, B);
+    EXPECT_EQ(rob.schedule()->tag, A);  // no recorder: the fullest entry
+    EXPECT_EQ(rob.schedule()->rp, 2u);
+    // A's CCRPs are both in flight: the literal rule waits, "idle" serves B.
+    const auto next = rob.schedule();
+    EXPECT_EQ(bool(next), idle);
+    if (!idle) continue;
+    EXPECT_EQ(next->tag, B);
+    // A's CCRP comes back while B is current; B has nothing ready: back to A.
+    rob.reschedule(1);
+    EXPECT_EQ(rob.schedule()->rp, 1u);
+    EXPECT_EQ(rob.counters().tag_runs, 3u);  // A A | B | A
   }
 }
 

@@ -21,12 +21,13 @@ float sigmoid(double x) { return float(1.0 / (1.0 + std::exp(-x))); }
 
 TEST(Mlp, DefaultArchFitsTheMlpCache) {
   const MlpArch a = default_mlp_arch(16);
-  EXPECT_EQ(a.density_widths, (std::vector<int>{16, 32, 16}));
-  EXPECT_EQ(a.color_widths, (std::vector<int>{31, 32, 32, 3}));  // 16 + 3 + 6*2
+  EXPECT_EQ(a.density_widths, (std::vector<int>{16, 16, 8}));
+  EXPECT_EQ(a.color_widths, (std::vector<int>{23, 16, 3}));  // 8 + 3 + 6*2
   EXPECT_EQ(a.dir_frequencies, 2);
-  // Weights 16*32 + 32*16 + 31*32 + 32*32 + 32*3 = 3136; biases 32+16+32+32+3 = 115.
-  EXPECT_EQ(a.q8_bytes(), 3136u + 8u * 115u + 4u * 18u);
-  EXPECT_LE(a.q8_bytes(), kMlpCacheBytes);
+  // Weights 16*16 + 16*8 + 23*16 + 16*3 = 800; biases 16+8+16+3 = 43.
+  EXPECT_EQ(a.q8_bytes(), 800u + 8u * 43u + 4u * 18u);
+  EXPECT_EQ(a.q8_bytes(), 1216u);
+  EXPECT_EQ(kMlpCacheBytes / a.q8_bytes(), 6u);  // six MLPs fit the MLP cache
 }
 
 TEST(Mlp, EncodeDirectionValues) {

@@ -253,6 +253,29 @@ TEST(Cache, MshrMergesAndStallsWhenFull) {
   EXPECT_THROW(c.schedule_fill(4096, 50), Error);  // no outstanding miss
 }
 
+TEST(Cache, PrefetchIsUncountedAndFeedsLaterHits) {
+  CacheConfig cfg = tiny(Replacement::Lru);
+  cfg.mshr_entries = 2;
+  Cache c(cfg);
+  EXPECT_EQ(c.prefetch(0, 0), CacheOutcome::MissIssued);
+  EXPECT_EQ(c.prefetch(32, 0), CacheOutcome::MissMerged);  // the same line is outstanding
+  EXPECT_EQ(c.prefetch(64, 0), CacheOutcome::MissIssued);
+  EXPECT_EQ(c.prefetch(128, 0), CacheOutcome::MissStalled);  // both MSHR entries busy
+  EXPECT_EQ(c.stats().accesses, 0u);
+  EXPECT_EQ(c.stats().mshr_full_stalls, 0u);
+  EXPECT_EQ(c.stats().prefetches_issued, 2u);
+  // A demand access to a prefetched line in flight merges; after the fill it hits.
+  EXPECT_EQ(c.access(64, 1), CacheOutcome::MissMerged);
+  c.schedule_fill(0, 5);
+  c.schedule_fill(64, 5);
+  c.tick(5);
+  EXPECT_EQ(c.prefetch(0, 6), CacheOutcome::Hit);
+  EXPECT_EQ(c.access(0, 6), CacheOutcome::Hit);
+  EXPECT_EQ(c.stats().accesses, 2u);
+  EXPECT_EQ(c.stats().hits, 1u);
+  EXPECT_EQ(c.stats().hits + c.stats().misses, c.stats().accesses);
+}
+
 TEST(Mshr, AllocatesMergesRefusesAndRetires) {
   Mshr m("m", 2);
   EXPECT_EQ(m.on_miss(7, 0), MshrOutcome::Allocated);

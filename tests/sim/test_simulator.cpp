@@ -169,6 +169,17 @@ TEST(Simulator, StatisticsObeyTheirInvariants) {
     const std::string p = cache;
     EXPECT_EQ(s.get(p + ".hits") + s.get(p + ".misses"), s.get(p + ".accesses")) << cache;
   }
+  // Per access (per sample): every sample is one access, and a batch adds at
+  // most one miss, so the per-access rate is at least the per-batch one.
+  for (const char* cache : {"features", "mlp"}) {
+    const std::string p = std::string("cache.") + cache + ".per_access.";
+    EXPECT_EQ(s.get(p + "hits") + s.get(p + "misses"), s.get(p + "accesses")) << cache;
+    EXPECT_EQ(s.get(p + "accesses"), double(c.ftu.samples)) << cache;
+  }
+  EXPECT_EQ(s.get("cache.features.per_access.misses"), s.get("cache.features.misses"));
+  EXPECT_EQ(s.get("cache.mlp.per_access.misses"), s.get("cache.mlp.batches") - s.get("cache.mlp.batch_hits"));
+  EXPECT_GE(r.summary.feature_hit_rate_per_access, r.summary.feature_hit_rate);
+  EXPECT_GE(r.summary.mlp_hit_rate_per_access, r.summary.mlp_hit_rate);
   EXPECT_EQ(s.get("cache.micro_grid.accesses"), double(c.ftu.micro_word_reads));
   EXPECT_EQ(s.get("cache.features.accesses"), double(c.ftu.batches));
 
@@ -187,15 +198,63 @@ TEST(Simulator, StatisticsObeyTheirInvariants) {
   EXPECT_EQ(s.get("sim.unit.vru.busy_cycles"), double(c.ftu.samples));
   EXPECT_DOUBLE_EQ(r.summary.fps, 380e6 / double(r.summary.cycles));
 
-  // Energy events: 3136 MACs per sample for the default MLP (density net
-  // 16x32 + 32x16, colour net 31x32 + 32x32 + 32x3), 8 bank reads per sample.
-  EXPECT_EQ(r.energy_run.event_counts.at("int8_mult"), 3136 * c.ftu.samples);
+  // Energy events: 800 MACs per sample for the default MLP (density net
+  // 16x16 + 16x8, colour net 23x16 + 16x3), 8 bank reads per sample.
+  EXPECT_EQ(r.energy_run.event_counts.at("int8_mult"), 800 * c.ftu.samples);
   EXPECT_EQ(r.energy_run.event_counts.at("feature_sram_read"), 8 * c.ftu.samples);
-  EXPECT_EQ(r.energy_run.event_counts.at("dram_bit"),
+  const char* dram_event = preset().energy.dram == DramEnergySource::Events ? "dram_bit" : "dram_io_bit";
+  EXPECT_EQ(r.energy_run.event_counts.at(dram_event),
             8 * uint64_t(s.get("dram.read_bytes") + s.get("dram.write_bytes")));
   ASSERT_TRUE(r.energy.has_value());
   EXPECT_DOUBLE_EQ(r.energy->point.voltage_V, 1.21);
   EXPECT_GT(r.energy->nJ_per_pixel, 0.0);
+}
+
+TEST(SramBudget, EveryBufferIsCountedAndOneByteOverIsRefused) {
+  const SimConfig& cfg = preset();
+  const SramBudget b = compute_sram_budget(cfg, {256, 16, 1216});
+  // The three caches are their configured sizes; the bitmaps are Rc^3 and Rf^3 bits.
+  auto bytes = [&](const std::string& name) {
+    for (const SramBuffer& x : b.buffers)
+      if (x.name == name) return x.bytes;
+    ADD_FAILURE() << "no buffer " << name;
+    return uint64_t(0);
+  };
+  EXPECT_EQ(bytes("micro_grid_cache"), uint64_t(cfg.chip.micro_grid_cache_bytes));
+  EXPECT_EQ(bytes("mlp_cache"), uint64_t(cfg.chip.mlp_cache_bytes));
+  EXPECT_EQ(bytes("feature_cache"), uint64_t(feature_cache_lines(cfg.chip, 16)) * 1000);
+  EXPECT_EQ(bytes("coarse_bitmap"), 64u);      // 8^3 bits
+  EXPECT_EQ(bytes("fine_bitmap"), 32768u);     // 64^3 bits
+  EXPECT_EQ(bytes("tme_weights"), 1216u);      // the MLP in the MAC array
+  uint64_t others = 0, total = 0;
+  for (const SramBuffer& x : b.buffers) {
+    total += x.bytes;
+    if (x.sram_class == SramClass::Others) others += x.bytes;
+  }
+  EXPECT_EQ(b.class_bytes[int(SramClass::Others)], others);
+  EXPECT_EQ(b.total_bytes(), total);
+  // The RP buffer grows by whole RPs.
+  SimConfig bigger = cfg;
+  bigger.chip.rp_buffer_capacity = cfg.chip.rp_buffer_capacity * 2;
+  const SramBudget b2 = compute_sram_budget(bigger, {256, 16, 1216});
+  uint64_t rp2 = 0;
+  for (const SramBuffer& x : b2.buffers)
+    if (x.name == "rp_buffer") rp2 = x.bytes;
+  EXPECT_GE(rp2, 2 * bytes("rp_buffer"));
+
+  // The preset fits; a budget one byte short of the need is refused, naming
+  // the class, the overrun and the largest buffer.
+  EXPECT_FALSE(b.over_budget()) << b.format();
+  SimConfig tight = cfg;
+  tight.sram_budget.others_bytes = others - 1;
+  const SramBudget over = compute_sram_budget(tight, {256, 16, 1216});
+  ASSERT_TRUE(over.over_budget());
+  ASSERT_EQ(over.violations().size(), 1u);
+  const std::string v = over.violations()[0];
+  EXPECT_NE(v.find("'others'"), std::string::npos) << v;
+  EXPECT_NE(v.find("1 over"), std::string::npos) << v;
+  EXPECT_NE(v.find("fine_bitmap"), std::string::npos) << v;
+  EXPECT_EQ(over.to_json()["over_budget"], true);
 }
 
 TEST(Simulator, FrameRateRisesWithTheClockButSubLinearlyWhenMemoryWaits) {
@@ -207,7 +266,9 @@ TEST(Simulator, FrameRateRisesWithTheClockButSubLinearlyWhenMemoryWaits) {
     SimConfig c = preset();
     c.clock_MHz = mhz;
     const SimResult r = simulate_chip(m, cam, c);
-    EXPECT_GE(r.summary.fps, last_fps) << mhz << " MHz";
+    // Tag switches depend on timing (switch_when: idle), so on the memory-bound
+    // plateau the frame rate may dip by a fraction of a percent; it never falls.
+    EXPECT_GE(r.summary.fps, 0.99 * last_fps) << mhz << " MHz";
     // The DRAM keeps its own clock: the faster core waits more of its cycles.
     EXPECT_GE(r.summary.cycles, last_cycles) << mhz << " MHz";
     last_fps = r.summary.fps;
@@ -218,6 +279,7 @@ TEST(Simulator, FrameRateRisesWithTheClockButSubLinearlyWhenMemoryWaits) {
   fast.clock_MHz = 1500;
   const double f50 = simulate_chip(m, cam, slow).summary.fps, f1500 = simulate_chip(m, cam, fast).summary.fps;
   EXPECT_LT(f1500 / f50, 1500.0 / 50.0);
+  EXPECT_GT(f1500, 1.2 * f50);
 }
 
 TEST(Simulator, ProgressReachesEveryPacket) {
@@ -301,7 +363,7 @@ TEST(SimConfig, ErrorsNameTheKey) {
   expect_error(dram + "timing: {tme: {macs: 3}}}", "test.yaml.simulator.timing.tme: unknown key 'macs'");
   expect_error(dram + "clock_MHz: fast}", "test.yaml.simulator.clock_MHz");
   expect_error(dram + "timing: {vru: {cycles_per_sample: 0}}}", "vru.cycles_per_sample");
-  expect_error(dram + "energy: {dram: both}}", "'both' is not events or model");
+  expect_error(dram + "energy: {dram: both}}", "'both' is not events, model or access");
   expect_error("simulator: {memory: {dram: no-such-part}}", "no-such-part");
   expect_error("simulator: {memory: {dram: {name: x}}}", "test.yaml.simulator.memory.dram");
 }
