@@ -121,6 +121,40 @@ TEST_F(Commands, SimulateWritesItsOutputsAndTechniquesChangeOnlyTiming) {
   EXPECT_NE(r.err.find("bogus"), std::string::npos) << r.err;
 }
 
+// A preset whose buffers do not fit Table I's SRAM classes is refused before
+// any simulation, naming the class, the overrun and its largest buffers;
+// --allow-over-budget runs it and marks the outputs.
+TEST_F(Commands, SimulateRefusesAPresetOverTheSramBudget) {
+  const std::string model = (dir_ / "s.edrnr").string();
+  ASSERT_EQ(run("make-scene several --res 32 --quantized-only -o " + model).exit_code, 0);
+  RunResult r = run("simulate " + model + " --width 8 -q -o " + (dir_ / "a").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto j = nlohmann::json::parse(read_file_text(dir_ / "a" / "stats.json"));
+  const uint64_t others = j["sram_budget"]["classes"]["others"]["bytes"].get<uint64_t>();
+  EXPECT_EQ(j["sram_budget"]["over_budget"], false);
+  EXPECT_EQ(j["stats"]["sram.class.others_bytes"]["value"].get<uint64_t>(), others);
+  // The same chip with an "others" budget one byte short of what its buffers need.
+  const fs::path preset = dir_ / "tight.yaml";
+  write_file_atomic(preset, "simulator:\n  sram_budget_bytes:\n    others: " + std::to_string(others - 1) + "\n");
+  r = run("simulate " + model + " --width 8 -q --chip " + preset.string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("'others'"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("1 over its budget"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("rp_buffer"), std::string::npos) << r.err;  // the largest at Rm = 32
+  EXPECT_FALSE(fs::exists(dir_ / "b"));
+  r = run("simulate " + model + " --width 8 -q --allow-over-budget --chip " + preset.string() + " -o " +
+          (dir_ / "b").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("over Table I's SRAM budget"), std::string::npos) << r.out;
+  j = nlohmann::json::parse(read_file_text(dir_ / "b" / "stats.json"));
+  EXPECT_EQ(j["sram_budget"]["over_budget"], true);
+  // --sram lists every buffer.
+  r = run("simulate " + model + " --width 8 -q --sram");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* b : {"rp_buffer", "rp_rob", "location_shifter", "computation_sram", "fine_bitmap", "tme_weights"})
+    EXPECT_NE(r.out.find(b), std::string::npos) << b;
+}
+
 TEST_F(Commands, BadInputGetsAClearErrorAndNonZeroExit) {
   const std::string model = (dir_ / "s.edrnr").string();
   ASSERT_EQ(run("make-scene sphere --res 32 --quantized-only -o " + model).exit_code, 0);
