@@ -2,7 +2,7 @@
 // scene (micro resolution 256, as `edrnr make-scene several`) through
 // simulate_chip, at 200x200 and 800x800, on one and two threads; and the
 // memory system's cost per core cycle; and the bundled lego model
-// (assets/default.edrnr) from its first test view, the host-speed target's
+// (assets/lego.edrnr) from its first test view, the host-speed target's
 // workload. docs/simulator.md lists the figures.
 //
 //   bench_sim --benchmark_filter=Frame/800    # the procedural scene, 800x800
@@ -67,10 +67,10 @@ BENCHMARK(BM_SimulateFrame)
 // The bundled lego model, test view 0 of the dataset beside the source tree,
 // 800x800; skipped when the model or the dataset is missing.
 void BM_SimulateLego(benchmark::State& state) {
-  const std::filesystem::path model = kSource / "assets/default.edrnr";
+  const std::filesystem::path model = kSource / "assets/lego.edrnr";
   const std::filesystem::path data = kSource.parent_path() / "shared/data/nerf_synthetic/lego";
   if (!std::filesystem::exists(model) || !std::filesystem::exists(data / "transforms_test.json")) {
-    state.SkipWithError("needs assets/default.edrnr and ../shared/data/nerf_synthetic/lego");
+    state.SkipWithError("needs assets/lego.edrnr and ../shared/data/nerf_synthetic/lego");
     return;
   }
   const SceneModel m = load_model(model);

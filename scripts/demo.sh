@@ -13,7 +13,7 @@ cd "$(dirname "$0")/.."
 OUT=${OUT:-demo-out}
 mkdir -p "$OUT"
 
-MODEL=${MODEL:-assets/default.edrnr}
+MODEL=${MODEL:-assets/lego.edrnr}
 DATASET=${DATASET:-../shared/data/nerf_synthetic/lego}
 if [ ! -f "$MODEL" ]; then
   echo "demo: no bundled model at $MODEL; using the procedural 'several objects' scene"
