@@ -8,6 +8,7 @@ PACKAGES=(
   libcli11-dev nlohmann-json3-dev libyaml-cpp-dev libfmt-dev
   libspng-dev zlib1g-dev libeigen3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
+  python3 python3-matplotlib   # scripts/report_figures.py (edrnr reproduce)
 )
 
 missing=()
