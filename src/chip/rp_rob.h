@@ -64,7 +64,7 @@ struct RpRobConfig {
   int recent_tags = 4;  // size of the LRU recent-tags recorder
   bool reorder = true;
   TagSwitchRule tag_switch = TagSwitchRule::Paper;
-  bool switch_when_idle = true;  // false: the paper's literal rule (switch once the tag's CCRPs have all retired)
+  bool switch_when_idle = false;  // false: the paper's rule (switch once the tag's CCRPs have all retired)
   bool operator==(const RpRobConfig&) const = default;
 };
 

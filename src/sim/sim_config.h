@@ -73,7 +73,7 @@ struct SimMemory {
   DramConfig dram;
   uint32_t max_request_bytes = 64;  // larger transfers are split into DRAM requests of at most this size
   bool preload_bitmaps = true;      // read the coarse and fine bitmaps from DRAM before traversal starts
-  bool write_output = true;         // write each finished RP's record (pixels, coordinates) to DRAM
+  bool write_output = false;        // write each finished RP's record (pixels, coordinates) to DRAM (else: to the host)
   uint32_t output_record_bytes = 16;
   SimCacheConfig micro_grid_cache{64, 4, Replacement::Lru, 1, 4, 1};
   SimCacheConfig mlp_cache{64, 0, Replacement::Lru, 1, 8, 1};
@@ -118,8 +118,15 @@ struct SimConfig {
   SramBudgetLimits sram_budget;
 };
 
-// Throws Error naming the field when a value is out of range.
+// Throws Error naming the field when a value is out of range, including the
+// limits of core/limits.h (clock, sizes that are allocated, latencies).
 void validate(const SimConfig& config);
+
+// The limits of core/limits.h on a functional chip config (sizes that are
+// allocated: RP buffer, RP-ROB, queues, caches). edrnr::validate(ChipConfig)
+// checks the values' meaning; this checks that they stay within what a run
+// can hold. Throws Error naming the field, the value and the limit.
+void check_chip_limits(const ChipConfig& config);
 
 // Reads a chip preset. The `simulator` section's DRAM (a preset name looked up
 // in <base_dir>/../dram and dram_search_dirs, a path, or a map in the

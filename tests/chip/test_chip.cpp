@@ -102,7 +102,7 @@ TEST(Chip, DeterministicAcrossRuns) {
 
 TEST(Chip, TechniquesDoWhatThePaperSays) {
   const SceneModel& m = several_model();
-  const Camera cam = test_camera(48, 48);
+  const Camera cam = test_camera(96, 96);
   ChipCounters on, no_aabb, no_reorder, in_order;
   render_chip(m, cam, ChipConfig{}, &on);
   ChipConfig c;

@@ -156,8 +156,14 @@ TEST(Simulator, StatisticsObeyTheirInvariants) {
   for (const char* type : {"bitmaps", "micro_grid", "features", "mlp_weights"})
     asked += s.get(std::string("mem.") + type + ".read_bytes");
   EXPECT_GE(s.get("dram.read_bytes"), asked);
-  // One 16-byte output record per RP.
-  EXPECT_EQ(s.get("mem.rp_output.write_bytes"), 16.0 * double(c.packets));
+  // The output records go to the host, not to DRAM (the preset); with
+  // write_output, one 16-byte record per RP is written.
+  EXPECT_EQ(s.get("mem.rp_output.write_bytes"), 0.0);
+  SimConfig frame_buffer = preset();
+  frame_buffer.memory.write_output = true;
+  const SimResult fb = simulate_chip(m, cam, frame_buffer);
+  EXPECT_EQ(fb.stats->get("mem.rp_output.write_bytes"), 16.0 * double(c.packets));
+  EXPECT_EQ(fb.image.data, r.image.data);
 
   // Hits and misses add up, per cache.
   EXPECT_EQ(s.get("cache.mlp.batches"), double(c.ftu.batches));
