@@ -26,6 +26,13 @@ import tempfile
 NO_MATPLOTLIB = 3
 
 
+def public_mode():
+    """The mode a new file gets under the process umask (mkstemp makes 0600)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def write_atomic(path, data):
     """Writes bytes or text to a temporary file beside `path` and renames it over `path`."""
     d = os.path.dirname(path) or "."
@@ -33,6 +40,7 @@ def write_atomic(path, data):
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data.encode("utf-8") if isinstance(data, str) else data)
+        os.chmod(tmp, public_mode())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -100,6 +108,7 @@ def draw_figures(results, out_dir):
             fd, tmp = tempfile.mkstemp(prefix=fid + ".tmp.", suffix="." + ext, dir=fig_dir)
             os.close(fd)
             fig.savefig(tmp, dpi=110, bbox_inches="tight", metadata={"Date": None} if ext == "svg" else None)
+            os.chmod(tmp, public_mode())
             os.replace(tmp, path)
             paths.append(path)
         plt.close(fig)
