@@ -2,7 +2,9 @@
 // model of the EDR-NR chip and reports what its units counted.
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <iostream>
 #include <memory>
 #include <sstream>
@@ -12,12 +14,14 @@
 #include "commands.h"
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/limits.h"
 #include "core/metrics.h"
 #include "core/stats.h"
 #include "model/model_io.h"
 #include "render/cameras.h"
 #include "render/options.h"
 #include "render/reference.h"
+#include "sim/sim_config.h"
 
 namespace edrnr::cli {
 namespace {
@@ -35,12 +39,19 @@ Camera pick_camera(const ChipRenderOptions& o) {
   if ((o.orbit_opt->count() > 0) == (o.camera_opt->count() > 0)) fail("give exactly one of --orbit and --camera");
   if (o.camera_opt->count()) {
     Camera cam = load_camera_json(o.camera_file);
-    if (!o.width_opt->count() && !o.height_opt->count()) return cam;
+    if (!o.width_opt->count() && !o.height_opt->count()) {
+      limits::check_image_size(cam.width, cam.height, fmt::format("--camera '{}': image size", o.camera_file));
+      return cam;
+    }
     const int w = o.width_opt->count() ? o.width : cam.width;
-    const int h = o.height_opt->count() ? o.height : int(std::lround(double(w) * cam.height / cam.width));
+    const int h = o.height_opt->count()
+                      ? o.height
+                      : int(std::clamp<double>(std::round(double(w) * cam.height / cam.width), 1, 1e9));
+    limits::check_image_size(w, h, "--width/--height");
     return resize_camera(cam, w, h);
   }
   const int h = o.height_opt->count() ? o.height : o.width;
+  limits::check_image_size(o.width, h, "--width/--height");
   return orbit_camera(o.width, h, o.orbit, o.elevation, o.radius, o.fov);
 }
 
@@ -54,18 +65,27 @@ void run_chip_render(const ChipRenderOptions& o) {
   if (!o.banks.empty()) cfg.bank_mapping = chip::parse_bank_mapping(o.banks, "--banks");
   if (!o.background.empty()) parse_background(o.background, "--background", cfg.background);
   validate(cfg);
+  sim::check_chip_limits(cfg);
+  check_step_micro(cfg.step_micro, 0, "chip config render.step_micro");
+  check_output_path(o.output, "-o");
+  if (!o.stats_file.empty()) check_output_path(o.stats_file, "--stats");
   const Camera cam = pick_camera(o);
   const SceneModel model = load_model(o.model);
+  check_step_micro(cfg.step_micro, model.micro_res, "chip config render.step_micro");
 
   ChipCounters counters;
   const auto t0 = std::chrono::steady_clock::now();
   const Image img = render_chip(model, cam, cfg, &counters);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   write_png(o.output, img);
-  // The fully resolved config beside the result.
-  std::stringstream yaml;
-  yaml << chip_config_to_yaml(cfg) << "\n";
-  write_file_atomic(o.output + ".chip.yaml", yaml.str());
+  // The fully resolved config beside the result (not beside a device or FIFO:
+  // /dev/stdout.chip.yaml is no place for it).
+  const bool config_beside = output_is_regular_file(o.output);
+  if (config_beside) {
+    std::stringstream yaml;
+    yaml << chip_config_to_yaml(cfg) << "\n";
+    write_file_atomic(o.output + ".chip.yaml", yaml.str());
+  }
 
   StatsRegistry stats;
   export_chip_stats(counters, stats);
@@ -82,8 +102,9 @@ void run_chip_render(const ChipRenderOptions& o) {
   stats.value("chip.functional_seconds", "s", "wall time of the functional model").set(seconds);
   if (!o.stats_file.empty()) write_file_atomic(o.stats_file, stats.to_json().dump(2) + "\n");
 
-  fmt::print("{}: {}x{} through the chip model in {:.2f} s (config beside it: {}.chip.yaml)\n", o.output, img.width,
-             img.height, seconds, o.output);
+  fmt::print("{}: {}x{} through the chip model in {:.2f} s ({})\n", o.output, img.width, img.height, seconds,
+             config_beside ? fmt::format("config beside it: {}.chip.yaml", o.output)
+                           : std::string("not a regular file: no config written beside it"));
   fmt::print("  rays advancing together per RP: coarse {:.2f} (paper 3.89), fine {:.2f} (paper 3.48)\n",
              counters.coarse_rays_per_iteration(), counters.fine_rays_per_iteration());
   fmt::print("  CCRPs per CV tag switch {:.2f}; feature cache hit rate {:.4f}; micro-grid hit rate {:.4f}\n",

@@ -5,10 +5,12 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <utility>
 
 #include "commands.h"
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/limits.h"
 #include "core/stats.h"
 #include "sim/dram.h"
 #include "sim/dram_config.h"
@@ -20,8 +22,9 @@ namespace {
 struct DramOptions {
   std::string preset;
   std::string trace;
-  uint64_t random_count = 0;
-  uint64_t stream_count = 0;
+  int64_t random_count = 0;
+  int64_t stream_count = 0;
+  CLI::Option *random_opt = nullptr, *stream_opt = nullptr;
   double write_ratio = 0.0;
   uint64_t seed = 1;
   std::string json_path;
@@ -46,24 +49,34 @@ std::vector<std::filesystem::path> preset_search_dirs() {
 }
 
 void run_dram(const DramOptions& o) {
-  int workloads = !o.trace.empty() + (o.random_count > 0) + (o.stream_count > 0);
+  const int workloads = !o.trace.empty() + (o.random_opt->count() > 0) + (o.stream_opt->count() > 0);
   if (workloads != 1) fail("dram: give exactly one of --trace FILE, --random N or --stream N (N > 0)");
+  for (auto [opt, n] : {std::pair{o.random_opt, o.random_count}, std::pair{o.stream_opt, o.stream_count}})
+    if (opt->count() && (n < 1 || uint64_t(n) > limits::kMaxDramRequests))
+      fail("{} {}: must be between 1 and {} requests (limit)", opt->get_name(), n, limits::kMaxDramRequests);
   if (!(o.write_ratio >= 0.0 && o.write_ratio <= 1.0)) {
     fail("--write-ratio {} must be between 0 and 1", o.write_ratio);
   }
-  std::filesystem::path preset_path = sim::find_dram_preset(o.preset, preset_search_dirs());
-  sim::DramConfig config = sim::load_dram_config(preset_path);
+  if (!o.json_path.empty()) check_output_path(o.json_path, "--json");
+  std::filesystem::path preset_path;
+  sim::DramConfig config;
+  try {
+    preset_path = sim::find_dram_preset(o.preset, preset_search_dirs());
+    config = sim::load_dram_config(preset_path);
+  } catch (const Error& e) {
+    fail("--preset '{}': {}", o.preset, e.what());
+  }
 
   sim::DramRequestSource source;
   std::string workload;
   if (!o.trace.empty()) {
     source = sim::trace_source(sim::load_dram_trace(o.trace));
     workload = fmt::format("trace {}", o.trace);
-  } else if (o.random_count > 0) {
-    source = sim::random_source(config, o.random_count, o.write_ratio, o.seed);
+  } else if (o.random_opt->count()) {
+    source = sim::random_source(config, uint64_t(o.random_count), o.write_ratio, o.seed);
     workload = fmt::format("random, {} requests, write ratio {}, seed {}", o.random_count, o.write_ratio, o.seed);
   } else {
-    source = sim::stream_source(config, o.stream_count, o.write_ratio, o.seed);
+    source = sim::stream_source(config, uint64_t(o.stream_count), o.write_ratio, o.seed);
     workload = fmt::format("stream, {} requests, write ratio {}, seed {}", o.stream_count, o.write_ratio, o.seed);
   }
 
@@ -99,8 +112,10 @@ void register_dram_cmd(CLI::App& app) {
   cmd->add_option("--preset", opts->preset, "DRAM preset name (configs/dram/NAME.yaml) or a YAML file path")
       ->required();
   auto* trace = cmd->add_option("--trace", opts->trace, "trace file: one '0xADDRESS READ|WRITE CYCLE' per line");
-  auto* random = cmd->add_option("--random", opts->random_count, "N one-burst requests at random addresses");
-  auto* stream = cmd->add_option("--stream", opts->stream_count, "N one-burst requests at sequential addresses");
+  auto* random = opts->random_opt =
+      cmd->add_option("--random", opts->random_count, "N one-burst requests at random addresses");
+  auto* stream = opts->stream_opt =
+      cmd->add_option("--stream", opts->stream_count, "N one-burst requests at sequential addresses");
   trace->excludes(random)->excludes(stream);
   random->excludes(stream);
   cmd->add_option("--write-ratio", opts->write_ratio, "fraction of synthetic requests that are writes (0..1)");

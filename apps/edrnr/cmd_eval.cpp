@@ -17,6 +17,7 @@
 #include "core/error.h"
 #include "core/file_io.h"
 #include "core/image.h"
+#include "core/limits.h"
 #include "core/metrics.h"
 #include "data/dataset.h"
 #include "engines.h"
@@ -36,6 +37,8 @@ struct EvalOptions {
   int threads = 0;
   CLI::Option *views_opt, *limit_opt;
 };
+
+constexpr int kSsimWindowPixels = 11;  // core/metrics.cpp
 
 // "0,3,5-7" -> 0 3 5 6 7, each below `count`.
 std::vector<int> parse_views(const std::string& text, size_t count) {
@@ -75,7 +78,7 @@ void run_eval(const EvalOptions& o) {
   if (o.views_opt->count() && o.limit_opt->count()) fail("give --views or --limit, not both");
   if (o.limit_opt->count() && o.limit < 1) fail("--limit {}: must be at least 1", o.limit);
   if (o.downscale < 1) fail("--downscale {}: must be a positive integer", o.downscale);
-  if (o.threads < 0) fail("--threads {}: must be 0 (all cores) or more", o.threads);
+  limits::check_threads(o.threads);
   const Engine& engine = find_engine(o.engine);
   const bool vs_reference = std::string(engine.name) != "reference";
   RenderSettings s;
@@ -83,7 +86,10 @@ void run_eval(const EvalOptions& o) {
   s.form = parse_model_form(o.form, "--form");
   parse_background(o.background, "--background", s.background);
   s.threads = o.threads;
-  if (!(o.step > 0.f && std::isfinite(o.step))) fail("--step {}: must be a positive number of micro voxels", o.step);
+  check_step_micro(o.step, 0, "--step");
+  if (!o.json_path.empty()) check_output_path(o.json_path, "--json");
+  if (!o.save_dir.empty() && std::filesystem::exists(o.save_dir) && !std::filesystem::is_directory(o.save_dir))
+    fail("--save-dir '{}': not a folder", o.save_dir);
 
   DatasetOptions d;
   d.split = o.split;
@@ -97,8 +103,19 @@ void run_eval(const EvalOptions& o) {
     const size_t n = o.limit_opt->count() ? std::min(ds.frames.size(), size_t(o.limit)) : ds.frames.size();
     for (size_t i = 0; i < n; ++i) views.push_back(int(i));
   }
+  // SSIM compares 11x11 windows: smaller views are refused before any rendering.
+  const Camera& first = ds.frames[0].camera;
+  if (first.width < kSsimWindowPixels || first.height < kSsimWindowPixels)
+    fail("{}: the {} views are {}x{} pixels{}; SSIM needs at least {}x{}", o.dataset, o.split, first.width,
+         first.height, o.downscale > 1 ? fmt::format(" after --downscale {}", o.downscale) : "", kSsimWindowPixels,
+         kSsimWindowPixels);
   const SceneModel model = load_model(o.model);
-  if (!o.save_dir.empty()) std::filesystem::create_directories(o.save_dir);
+  check_step_micro(o.step, model.micro_res, "--step");
+  if (!o.save_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(o.save_dir, ec);
+    if (ec) fail("--save-dir '{}': cannot create the folder: {}", o.save_dir, ec.message());
+  }
 
   nlohmann::ordered_json per_view = nlohmann::ordered_json::array();
   double psnr_sum = 0, ssim_sum = 0, seconds_sum = 0, vs_ref_sum = 0;

@@ -150,7 +150,7 @@ void print_text(const InspectOptions& o, size_t file_bytes, const SceneModel& m,
 }
 
 void run_inspect(const InspectOptions& o) {
-  std::vector<uint8_t> bytes = read_file_bytes(o.file);
+  std::vector<uint8_t> bytes = read_model_file(o.file);
   // The format itself is always validated; the model checks are reported below instead of thrown.
   SceneModel m = parse_model(bytes.data(), bytes.size(), o.file, ModelLoadOptions{.check_invariants = false});
   std::vector<ModelCheck> checks;

@@ -9,6 +9,7 @@
 
 #include "commands.h"
 #include "core/error.h"
+#include "core/file_io.h"
 #include "model/model_io.h"
 #include "model/procedural.h"
 #include "render/options.h"
@@ -34,6 +35,7 @@ void run_make_scene(const MakeSceneOptions& o) {
   if (o.channels < 4 || o.channels > kMaxFeatureChannels)
     fail("--channels {}: must be between 4 and {}", o.channels, kMaxFeatureChannels);
 
+  check_output_path(o.output, "-o");
   std::vector<Shape> shapes = procedural_shapes(o.scene);
   const bool overrides = !o.center.empty() || !o.half_size.empty() || !o.color.empty() || o.radius_opt->count() ||
                          o.tube_opt->count() || o.sigma_opt->count();
@@ -66,12 +68,13 @@ void run_make_scene(const MakeSceneOptions& o) {
   po.store_float = !o.quantized_only;
   const auto t0 = std::chrono::steady_clock::now();
   const SceneModel m = make_procedural_model(o.scene, shapes, po);
-  save_model(o.output, m);
+  const std::vector<uint8_t> bytes = serialize_model(m);
+  write_file_atomic(o.output, bytes);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   fmt::print("{}: {} scene at micro resolution {}: {} occupied micro voxels, {} feature blocks, {} MLPs\n", o.output,
              o.scene, m.micro_res, m.occupancy[int(Tier::Micro)].count(), m.block_count(), m.mlp_count());
   fmt::print("  forms: {}; {} bytes; {:.2f} s\n", o.quantized_only ? "quantized" : "float and quantized",
-             std::filesystem::file_size(o.output), seconds);
+             bytes.size(), seconds);
 }
 
 void register_make_scene_cmd(CLI::App& app) {

@@ -2,6 +2,7 @@
 // JSON file or an orbit around the origin.
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -9,6 +10,8 @@
 
 #include "commands.h"
 #include "core/error.h"
+#include "core/file_io.h"
+#include "core/limits.h"
 #include "core/image.h"
 #include "data/dataset.h"
 #include "engines.h"
@@ -43,12 +46,12 @@ void pick_size(const RenderOptions& o, int w0, int h0, int& w, int& h) {
     h = o.height;
   } else if (o.width_opt->count()) {
     w = o.width;
-    h = std::max(1, int(std::lround(double(o.width) * h0 / w0)));
+    h = int(std::clamp<double>(std::round(double(o.width) * h0 / w0), 1, 1e9));
   } else if (o.height_opt->count()) {
     h = o.height;
-    w = std::max(1, int(std::lround(double(o.height) * w0 / h0)));
+    w = int(std::clamp<double>(std::round(double(o.height) * w0 / h0), 1, 1e9));
   }
-  if (w <= 0 || h <= 0 || w > 16384 || h > 16384) fail("--width/--height {}x{}: must be 1..16384 pixels", w, h);
+  limits::check_image_size(w, h, "--width/--height");
 }
 
 Camera pick_camera(const RenderOptions& o) {
@@ -85,11 +88,13 @@ void run_render(const RenderOptions& o) {
   s.step_micro = o.step;
   s.form = parse_model_form(o.form, "--form");
   parse_background(o.background, "--background", s.background);
-  if (o.threads < 0) fail("--threads {}: must be 0 (all cores) or more", o.threads);
+  limits::check_threads(o.threads);
   s.threads = o.threads;
-  if (!(o.step > 0.f && std::isfinite(o.step))) fail("--step {}: must be a positive number of micro voxels", o.step);
+  check_step_micro(o.step, 0, "--step");
+  check_output_path(o.output, "-o");
   const Camera cam = pick_camera(o);
   const SceneModel model = load_model(o.model);
+  check_step_micro(o.step, model.micro_res, "--step");
 
   RenderStats stats;
   const auto t0 = std::chrono::steady_clock::now();

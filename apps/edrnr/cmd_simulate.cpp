@@ -20,10 +20,12 @@
 #include "core/error.h"
 #include "core/file_io.h"
 #include "core/image.h"
+#include "core/limits.h"
 #include "core/metrics.h"
 #include "data/dataset.h"
 #include "model/model_io.h"
 #include "render/cameras.h"
+#include "render/options.h"
 #include "sim/simulator.h"
 
 namespace edrnr::cli {
@@ -166,16 +168,22 @@ struct ProgressLine {
 
 void run_simulate(const SimulateOptions& o) {
   if (o.threads < 1 || o.threads > 2) fail("--threads {}: must be 1 or 2", o.threads);
+  if (o.width_opt->count() || o.height_opt->count())
+    limits::check_image_size(o.width_opt->count() ? o.width : 800,
+                             o.height_opt->count() ? o.height : (o.width_opt->count() ? o.width : 800),
+                             "--width/--height");
+  if (o.clock_opt->count()) limits::check_range(o.clock, limits::kMinClockMHz, limits::kMaxClockMHz, "--clock", "MHz");
+  if (std::error_code ec; !o.output.empty() && fs::exists(o.output, ec) && !fs::is_directory(o.output, ec))
+    fail("-o '{}': not a folder (simulate writes image.png, stats.json, config.yaml and trace.json into a folder)",
+         o.output);
   const fs::path preset = find_chip_preset(o.chip);
   sim::SimConfig cfg = sim::load_sim_config(preset, config_dirs("dram"));
   if (!o.disable.empty()) apply_disable(o.disable, cfg.chip);
-  if (o.clock_opt->count()) {
-    if (!(o.clock > 0) || !std::isfinite(o.clock)) fail("--clock {}: must be a positive number of MHz", o.clock);
-    cfg.clock_MHz = o.clock;
-  }
+  if (o.clock_opt->count()) cfg.clock_MHz = o.clock;
   sim::validate(cfg);
   const View view = pick_view(o, cfg.chip);
   const SceneModel model = load_model(o.model);
+  check_step_micro(cfg.chip.step_micro, model.micro_res, "chip config render.step_micro");
   // Table I's SRAM budget: a preset whose buffers do not fit is refused
   // before any simulation, unless the user asks to go over (the report says so).
   const sim::SramBudget budget = sim::sram_budget_for(model, cfg);

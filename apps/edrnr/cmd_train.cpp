@@ -1,6 +1,7 @@
 // edrnr train: learns a scene model from a NeRF dataset on the CPU and writes
 // the quantized (INT4 features, INT8 MLPs) model; the float model on request.
 #include <fmt/format.h>
+#include <pthread.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -8,24 +9,38 @@
 #include <chrono>
 #include <csignal>
 #include <filesystem>
+#include <iterator>
+#include <vector>
 #include <memory>
 #include <string>
 
 #include "commands.h"
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/limits.h"
 #include "core/metrics.h"
 #include "data/dataset.h"
 #include "model/model_io.h"
 #include "render/reference.h"
+#include "train/checkpoint_io.h"
 #include "train/images.h"
 #include "train/trainer.h"
 
 namespace edrnr::cli {
 namespace {
 
+// SIGINT, SIGTERM and SIGHUP all stop the run at the end of the current step
+// with a checkpoint (a SIGKILL cannot be caught: the last periodic checkpoint
+// is what survives it).
 std::atomic<bool> g_interrupt{false};
-extern "C" void on_sigint(int) { g_interrupt.store(true); }
+std::atomic<int> g_signal{0};
+extern "C" void on_stop_signal(int sig) {
+  g_signal.store(sig);
+  g_interrupt.store(true);
+}
+constexpr int kStopSignals[] = {SIGINT, SIGTERM, SIGHUP};
+
+const char* signal_name(int sig) { return sig == SIGTERM ? "SIGTERM" : sig == SIGHUP ? "SIGHUP" : "SIGINT"; }
 
 struct TrainCmdOptions {
   std::string dataset, output, float_output, config, resume, checkpoint;
@@ -36,6 +51,29 @@ struct TrainCmdOptions {
   bool profile = false;
   CLI::Option *minutes_opt, *iters_opt, *seed_opt, *downscale_opt, *config_opt;
 };
+
+// Every file the run will write, checked before any work: each can be
+// written, and no two name the same file (the checkpoint clean-up would
+// otherwise delete the model, or the float model overwrite the quantized one).
+void check_outputs(const TrainCmdOptions& o, const std::filesystem::path& checkpoint) {
+  struct Out {
+    const char* flag;
+    std::filesystem::path path;
+  };
+  std::vector<Out> outs = {{"-o", o.output}, {"--checkpoint", checkpoint}};
+  if (!o.float_output.empty()) outs.push_back({"--float-output", o.float_output});
+  for (size_t i = 0; i < outs.size(); ++i)
+    for (size_t j = i + 1; j < outs.size(); ++j)
+      if (same_file(outs[i].path, outs[j].path))
+        fail("{} '{}' and {} '{}' name the same file; each output needs its own", outs[i].flag,
+             outs[i].path.string(), outs[j].flag, outs[j].path.string());
+  if (!o.resume.empty())
+    for (const Out& out : outs)
+      if (std::string(out.flag) != "--checkpoint" && same_file(out.path, o.resume))
+        fail("{} '{}' is the checkpoint given to --resume: writing the model there would destroy it", out.flag,
+             out.path.string());
+  for (const Out& out : outs) check_output_path(out.path, out.flag);
+}
 
 double peak_rss_gib() {
   rusage u{};
@@ -65,7 +103,7 @@ double eval_split(const SceneModel& model, const std::filesystem::path& root, co
 
 void run_train(const TrainCmdOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
-  if (o.threads < 0) fail("--threads {}: must be 0 (all cores) or more", o.threads);
+  limits::check_threads(o.threads);
   if (!(o.checkpoint_minutes > 0)) fail("--checkpoint-minutes {}: must be positive", o.checkpoint_minutes);
   if (o.eval_views < 0) fail("--eval-views {}: must not be negative", o.eval_views);
   const bool resuming = !o.resume.empty();
@@ -75,10 +113,18 @@ void run_train(const TrainCmdOptions& o) {
         "--resume continues with the checkpoint's settings: --config, --iters, --minutes, --seed and --downscale "
         "cannot change them");
 
+  if (o.checkpoint.empty() && !output_is_regular_file(o.output))
+    fail("-o '{}' is not a regular file, so the checkpoint cannot go beside it as '{}.ckpt': give --checkpoint FILE",
+         o.output, o.output);
+  const std::filesystem::path checkpoint_path(o.checkpoint.empty() ? o.output + ".ckpt" : o.checkpoint);
+  check_outputs(o, checkpoint_path);
+  if (o.eval_views > 0 && !std::filesystem::is_regular_file(std::filesystem::path(o.dataset) / "transforms_test.json"))
+    fail("--eval-views {}: '{}' has no test split (transforms_test.json) to evaluate on", o.eval_views, o.dataset);
+
   std::vector<uint8_t> ckpt;
   train::TrainConfig cfg;
   if (resuming) {
-    ckpt = read_file_bytes(o.resume);
+    ckpt = train::read_checkpoint_file(o.resume);
     // The dataset must be loaded as the checkpoint's run loaded it.
     cfg = train::Trainer::checkpoint_config(ckpt, o.resume);
   } else {
@@ -120,34 +166,65 @@ void run_train(const TrainCmdOptions& o) {
 
   train::TrainOptions opt;
   opt.threads = o.threads;
-  opt.checkpoint_path = std::filesystem::path(o.checkpoint.empty() ? o.output + ".ckpt" : o.checkpoint);
+  opt.checkpoint_path = checkpoint_path;
   opt.checkpoint_minutes = o.checkpoint_minutes;
   opt.progress = tty;
   opt.stop_after = o.stop_after;
   opt.interrupt = &g_interrupt;
   opt.log = say;
   g_interrupt.store(false);
-  auto previous = std::signal(SIGINT, on_sigint);
+  g_signal.store(0);
+  using Handler = void (*)(int);
+  Handler previous[std::size(kStopSignals)];
+  for (size_t i = 0; i < std::size(kStopSignals); ++i) previous[i] = std::signal(kStopSignals[i], on_stop_signal);
+  // A stop signal that arrived while blocked (inherited mask) is handled now.
+  sigset_t stop_set;
+  sigemptyset(&stop_set);
+  for (int sig : kStopSignals) sigaddset(&stop_set, sig);
+  pthread_sigmask(SIG_UNBLOCK, &stop_set, nullptr);
+  auto restore = [&] {
+    for (size_t i = 0; i < std::size(kStopSignals); ++i) std::signal(kStopSignals[i], previous[i]);
+  };
   bool done;
   try {
     done = trainer->run(opt);
   } catch (...) {
-    std::signal(SIGINT, previous);
+    restore();
     throw;
   }
-  std::signal(SIGINT, previous);
+  restore();
   const train::TrainStats st = trainer->stats();
   if (!done) {
     fmt::print("stopped at step {}/{}; checkpoint written to {}\n", st.step, st.iters, opt.checkpoint_path.string());
     fmt::print("continue with: edrnr train {} -o {} --resume {}\n", o.dataset, o.output, opt.checkpoint_path.string());
-    if (g_interrupt.load()) throw Error("interrupted");
+    std::fflush(stdout);
+    if (g_interrupt.load()) fail("interrupted by {}", signal_name(g_signal.load()));
     return;
   }
   const SceneModel quantized = trainer->export_model(true);
-  save_model(o.output, quantized);
   SceneModel float_model;
   if (!o.float_output.empty() || o.eval_views > 0) float_model = trainer->export_model(false);
-  if (!o.float_output.empty()) save_model(o.float_output, float_model);
+  try {
+    save_model(o.output, quantized);
+    if (!o.float_output.empty()) save_model(o.float_output, float_model);
+  } catch (const Error& e) {
+    // The finished run is not lost with the write: it is kept as a
+    // checkpoint, from which --resume writes the model without training again.
+    std::string kept;
+    try {
+      write_file_atomic(opt.checkpoint_path, trainer->checkpoint());
+      kept = fmt::format(
+          "the finished run is saved in the checkpoint '{}': once the problem is fixed, `edrnr train {} -o {} "
+          "--resume {}{}` writes the model without training again",
+          opt.checkpoint_path.string(), o.dataset, o.output, opt.checkpoint_path.string(),
+          o.float_output.empty() ? "" : " --float-output " + o.float_output);
+    } catch (const Error& e2) {
+      kept = fmt::format("the checkpoint '{}' could not be written either ({}); an earlier checkpoint there, if any, "
+                         "is intact",
+                         opt.checkpoint_path.string(), e2.what());
+    }
+    fail("{}; {}", e.what(), kept);
+  }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   fmt::print("trained {} steps in {:.1f} min: {} blocks, {} MLPs; peak memory {:.2f} GiB\n", st.step, seconds / 60,
              st.blocks, st.mlps, peak_rss_gib());

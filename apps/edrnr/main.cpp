@@ -2,6 +2,8 @@
 #include <algorithm>
 #include <cstdio>
 #include <exception>
+#include <new>
+#include <string>
 #include <utility>
 
 #include "commands.h"
@@ -31,6 +33,22 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", "edrnr 0.1.0");
   for (auto fn : edrnr::cli::registered_commands()) fn(app);
+  // A first word that is neither a flag nor a command: name it (CLI11 would
+  // only say that a subcommand is required).
+  if (argc > 1 && argv[1][0] != '-') {
+    const std::string word = argv[1];
+    std::string names;
+    bool known = false;
+    for (const CLI::App* sub : app.get_subcommands({})) {
+      known = known || sub->check_name(word);
+      names += (names.empty() ? "" : ", ") + sub->get_name();
+    }
+    if (!known) {
+      std::fprintf(stderr, "edrnr: error: unknown command '%s' (commands: %s; edrnr --help describes them)\n",
+                   word.c_str(), names.c_str());
+      return 1;
+    }
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -38,6 +56,10 @@ int main(int argc, char** argv) {
   } catch (const edrnr::Error& e) {
     std::fprintf(stderr, "edrnr: error: %s\n", e.what());
     return 1;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "edrnr: error: out of memory (an input larger than this machine can hold; "
+                         "docs/reliability.md lists the limits edrnr checks)\n");
+    return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "edrnr: internal error: %s\n", e.what());
     return 2;

@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/limits.h"
 
 namespace edrnr {
 
@@ -18,16 +19,18 @@ using Ctx = std::unique_ptr<spng_ctx, CtxDeleter>;
 }  // namespace
 
 Image read_png_rgba(const std::filesystem::path& path) {
-  std::vector<uint8_t> bytes = read_file_bytes(path);
+  std::vector<uint8_t> bytes = read_file_bytes(path, limits::kMaxPngFileBytes);
   Ctx ctx(spng_ctx_new(0));
   if (!ctx) fail("out of memory decoding '{}'", path.string());
   spng_set_crc_action(ctx.get(), SPNG_CRC_ERROR, SPNG_CRC_ERROR);
-  spng_set_image_limits(ctx.get(), 1 << 15, 1 << 15);
+  spng_set_image_limits(ctx.get(), 0x7fffffff, 0x7fffffff);  // the size is checked below, with a clearer message
   spng_set_chunk_limits(ctx.get(), 1 << 26, 1 << 26);
   if (int e = spng_set_png_buffer(ctx.get(), bytes.data(), bytes.size()))
     fail("'{}' is not a PNG: {}", path.string(), spng_strerror(e));
   spng_ihdr ihdr;
   if (int e = spng_get_ihdr(ctx.get(), &ihdr)) fail("'{}' is not a valid PNG: {}", path.string(), spng_strerror(e));
+  // The size the header claims, before anything of that size is allocated.
+  limits::check_image_size(int64_t(ihdr.width), int64_t(ihdr.height), fmt::format("PNG '{}':", path.string()));
   // 16-bit PNGs decode at 16 bits; all others at 8 bits, which is faster.
   // Either way a sample s of maximum m becomes s / m (k / 255 == 257 k / 65535).
   bool wide = ihdr.bit_depth == 16;

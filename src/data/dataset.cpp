@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/limits.h"
 
 namespace edrnr {
 
@@ -19,7 +20,7 @@ using nlohmann::json;
 
 namespace {
 
-constexpr int kMaxImageSidePx = 1 << 15;  // the PNG reader's limit
+constexpr int kMaxImageSidePx = limits::kMaxImageSide;
 
 // The number under `key`, which must be finite. `field` names it in messages.
 double finite_number(const json& value, const std::string& source, const std::string& field) {
@@ -76,8 +77,7 @@ std::pair<int, int> png_size(const fs::path& path) {
     return (uint32_t(p[0]) << 24) | (uint32_t(p[1]) << 16) | (uint32_t(p[2]) << 8) | uint32_t(p[3]);
   };
   uint32_t w = be32(head + 16), h = be32(head + 20);
-  if (w == 0 || h == 0 || w > kMaxImageSidePx || h > kMaxImageSidePx)
-    fail("'{}': unsupported PNG size {}x{}", path.string(), w, h);
+  limits::check_image_size(int64_t(w), int64_t(h), fmt::format("PNG '{}':", path.string()));
   return {int(w), int(h)};
 }
 
@@ -143,6 +143,7 @@ Camera parse_camera(const json& frame, const json& top, int frame_index, const s
   }
   cam.width = *w;
   cam.height = *h;
+  limits::check_image_size(cam.width, cam.height, fmt::format("{}: frames[{}]: image size", source, frame_index));
 
   std::string field;
   if (auto fl_x = lookup_number(frame, top, frame_index, "fl_x", source)) {
@@ -256,6 +257,12 @@ Dataset load_dataset(const fs::path& root, const DatasetOptions& options) {
   ds.split = options.split;
   ds.frames = parse_transforms(read_file_text(json_path), root, source, options.downscale);
   if (!options.load_images) return ds;
+  // All the images are decoded at full size before any downscale.
+  const int64_t full_pixels = int64_t(ds.frames[0].camera.width) * options.downscale *
+                              int64_t(ds.frames[0].camera.height) * options.downscale;
+  if (full_pixels * int64_t(ds.frames.size()) > limits::kMaxDatasetPixels)
+    fail("{}: {} images of {} pixels are {} pixels in all, over the limit of {} pixels for one split", source,
+         ds.frames.size(), full_pixels, full_pixels * int64_t(ds.frames.size()), limits::kMaxDatasetPixels);
 
   // Each thread decodes whole images into their own slots, so the result does
   // not depend on the schedule; the first error in frame order is reported.

@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/limits.h"
 
 namespace edrnr {
 namespace {
@@ -158,6 +159,30 @@ uint64_t mlp_f32_record_bytes(const MlpArch& a) {
 
 // ---- validation shared by saving and loading ----
 
+// The deepest nesting of objects and arrays in JSON text (brackets inside
+// strings do not count). Tools that print the metadata recurse this deep.
+int json_nesting_depth(const std::string& text) {
+  int depth = 0, deepest = 0;
+  bool in_string = false, escaped = false;
+  for (char c : text) {
+    if (in_string) {
+      if (escaped)
+        escaped = false;
+      else if (c == '\\')
+        escaped = true;
+      else if (c == '"')
+        in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '{' || c == '[') {
+      deepest = std::max(deepest, ++depth);
+    } else if (c == '}' || c == ']') {
+      --depth;
+    }
+  }
+  return deepest;
+}
+
 void validate_grid(const SceneModel& m, const std::string& src) {
   const char* names[3] = {"x", "y", "z"};
   for (int a = 0; a < 3; ++a) {
@@ -267,6 +292,10 @@ void validate_content(const SceneModel& m, const std::string& src) {
   size_t first = meta.find_first_not_of(" \t\r\n");
   if (first == std::string::npos || meta[first] != '{' || !nlohmann::json::accept(meta))
     fail("{}: {}: the text is not a JSON object", src, sec(kMetadata));
+  const int depth = json_nesting_depth(meta);
+  if (depth > limits::kMaxMetadataDepth)
+    fail("{}: {}: the JSON nests {} levels deep, over the limit of {}", src, sec(kMetadata), depth,
+         limits::kMaxMetadataDepth);
 }
 
 // Checks that array sizes match the counts (the loader builds models this way).
@@ -792,8 +821,29 @@ SceneModel parse_model(const uint8_t* data, size_t size, const std::string& src,
 
 SceneModel load_model(const std::filesystem::path& path) { return load_model(path, ModelLoadOptions{}); }
 
+std::vector<uint8_t> read_model_file(const std::filesystem::path& path) {
+  const std::string src = path.string();
+  InputFile f(path);
+  std::vector<uint8_t> bytes(kModelHeaderBytes);
+  bytes.resize(f.read(bytes.data(), kModelHeaderBytes));
+  if (bytes.size() < sizeof kMagic || !std::equal(kMagic, kMagic + 8, bytes.data()))
+    fail("{}: not an edrnr model (the file does not start with the magic \"EDRNRMDL\")", src);
+  if (bytes.size() < kModelHeaderBytes)
+    fail("{}: truncated: {} bytes, shorter than the {}-byte header", src, bytes.size(), kModelHeaderBytes);
+  const uint64_t total = load_u64(bytes.data() + 16);
+  if (total > limits::kMaxModelFileBytes)
+    fail("{}: the header gives a total size of {} bytes, over the limit of {} bytes for a model", src, total,
+         limits::kMaxModelFileBytes);
+  if (f.regular_size() >= 0 && uint64_t(f.regular_size()) != total)
+    fail("{}: the header gives a total size of {} bytes but there are {} (truncated or padded file)", src, total,
+         f.regular_size());
+  if (!f.read_rest(bytes, std::max<uint64_t>(total, kModelHeaderBytes)))
+    fail("{}: the file goes on past the total size of {} bytes its header gives (padded file)", src, total);
+  return bytes;
+}
+
 SceneModel load_model(const std::filesystem::path& path, const ModelLoadOptions& options) {
-  std::vector<uint8_t> bytes = read_file_bytes(path);
+  std::vector<uint8_t> bytes = read_model_file(path);
   return parse_model(bytes.data(), bytes.size(), path.string(), options);
 }
 

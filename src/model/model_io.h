@@ -39,7 +39,15 @@ struct ModelLoadOptions {
 SceneModel parse_model(const uint8_t* data, size_t size, const std::string& source = "model");
 SceneModel parse_model(const uint8_t* data, size_t size, const std::string& source, const ModelLoadOptions& options);
 
-// File wrappers; save writes atomically (temporary file, then rename).
+// Reads a model file's bytes for parse_model: the header is read first, and a
+// file that does not start with the magic, or whose size differs from the
+// header's total (at most limits::kMaxModelFileBytes), is refused before the
+// rest is read. Throws Error naming the file.
+std::vector<uint8_t> read_model_file(const std::filesystem::path& path);
+
+// File wrappers (load reads with read_model_file); save writes with
+// write_file_atomic (a temporary file renamed over a regular file; devices and
+// FIFOs written through; symbolic links followed).
 SceneModel load_model(const std::filesystem::path& path);
 SceneModel load_model(const std::filesystem::path& path, const ModelLoadOptions& options);
 void save_model(const std::filesystem::path& path, const SceneModel& model);

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/limits.h"
 
 namespace edrnr {
 namespace {
@@ -65,6 +66,21 @@ Vec3f parse_vec3(const std::string& text, const std::string& flag) {
   std::vector<float> v;
   if (!parse_numbers(text, v) || v.size() != 3) fail("{} '{}': expected three numbers X,Y,Z", flag, text);
   return {v[0], v[1], v[2]};
+}
+
+void check_step_micro(double step_micro, int micro_res, const std::string& what) {
+  if (!(step_micro > 0.0) || !std::isfinite(step_micro))
+    fail("{} {:.6g}: must be a positive number of micro voxels", what, step_micro);
+  if (step_micro > limits::kMaxStepMicro)
+    fail("{} {:.6g}: over the limit of {} micro voxels", what, step_micro, limits::kMaxStepMicro);
+  if (micro_res <= 0) return;
+  const double diagonal = std::sqrt(3.0) * double(micro_res);  // micro voxels
+  const double samples = std::ceil(diagonal / step_micro);
+  if (samples > double(limits::kMaxSamplesPerRay))
+    fail("{} {:.6g}: up to {:.3g} samples per ray at micro resolution {}, over the limit of {} (the smallest step "
+         "here is {:.3g})",
+         what, step_micro, samples, micro_res, limits::kMaxSamplesPerRay,
+         diagonal / double(limits::kMaxSamplesPerRay));
 }
 
 }  // namespace edrnr

@@ -18,4 +18,11 @@ const char* model_form_name(ModelForm form);
 // "X,Y,Z": three finite numbers.
 Vec3f parse_vec3(const std::string& text, const std::string& flag);
 
+// Checks a sample spacing in micro voxels against the limits (core/limits.h):
+// finite, positive, at most kMaxStepMicro, and (with a model's micro_res > 0)
+// at most kMaxSamplesPerRay candidate samples along the scene box's diagonal.
+// `what` names the flag or config field. Throws Error naming the limit and the
+// smallest step allowed.
+void check_step_micro(double step_micro, int micro_res, const std::string& what);
+
 }  // namespace edrnr

@@ -206,6 +206,34 @@ void DramSystem::tick() {
   }
 }
 
+void DramSystem::advance_idle(uint64_t target) {
+  while (cycle_ < target) {
+    if (requests_in_flight_ != 0) return;
+    // The first cycle at which schedule() could issue a command: with empty
+    // queues only a refresh can, once a rank's refresh falls due.
+    uint64_t next = target;
+    if (config_.refresh)
+      for (const Channel& ch : channels_)
+        for (const Rank& rank : ch.ranks) next = rank.refresh_pending ? cycle_ : std::min(next, rank.refresh_due);
+    if (next <= cycle_) {
+      tick();
+      continue;
+    }
+    // Cycles [cycle_, next): no command issues and nothing completes, so each
+    // tick would only count one background cycle per rank and advance the clock.
+    const uint64_t k = next - cycle_;
+    for (const Channel& ch : channels_)
+      for (const Rank& rank : ch.ranks) {
+        const uint64_t active =
+            rank.open_banks > 0 ? k : (rank.refresh_end > cycle_ ? std::min(k, rank.refresh_end - cycle_) : 0);
+        active_rank_cycles_ += active;
+        precharged_rank_cycles_ += k - active;
+      }
+    cycle_ += k;
+    cycles_ += k;
+  }
+}
+
 std::optional<DramCompletion> DramSystem::pop_completion() {
   if (completions_.empty()) return std::nullopt;
   DramCompletion c = completions_.front();

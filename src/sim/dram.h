@@ -90,6 +90,11 @@ class DramSystem {
   // Advances one DRAM clock: each channel issues at most one command, then
   // requests whose data has finished become completions.
   void tick();
+  // Advances to cycle `target` while no request is in flight, with the same
+  // result as ticking there one clock at a time (refreshes, background
+  // cycles, statistics), but jumping over the stretches in which nothing can
+  // happen. Returns at once if a request is in flight.
+  void advance_idle(uint64_t target);
 
   // Completed requests in completion order (ties: the order their last bursts
   // were issued).

@@ -6,9 +6,11 @@
 #include <algorithm>
 #include <set>
 #include <sstream>
+#include <utility>
 
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/limits.h"
 
 namespace edrnr::sim {
 namespace {
@@ -144,7 +146,9 @@ void DramConfig::validate() const {
     fail("DRAM config: structure.bus_width_bits = {} must be at least 8 and at least device_width_bits = {}",
          bus_width_bits, device_width_bits);
   }
-  if (!(tCK_ns > 0.0 && tCK_ns < 1e6)) fail("DRAM config: timing.tCK_ns = {} must be positive", tCK_ns);
+  if (!(tCK_ns >= limits::kMinDramTckNs && tCK_ns <= limits::kMaxDramTckNs))
+    fail("DRAM config: timing.tCK_ns = {} must be between {} and {} ns (limit; DDR3 parts run at 0.94 to 3.3 ns)",
+         tCK_ns, limits::kMinDramTckNs, limits::kMaxDramTckNs);
   auto positive = [](const char* field, uint32_t v) {
     if (v == 0) fail("DRAM config: {} must be at least 1 cycle", field);
   };
@@ -157,6 +161,21 @@ void DramConfig::validate() const {
   positive("timing.tCCD", tCCD);
   positive("timing.tRTP", tRTP);
   positive("timing.tRFC", tRFC);
+  // Every timing value is bounded, so a wait between commands stays short of a hang.
+  const std::pair<const char*, uint32_t> timings[] = {
+      {"timing.CL", CL},     {"timing.CWL", CWL},   {"timing.tRCD", tRCD}, {"timing.tRP", tRP},
+      {"timing.tRAS", tRAS}, {"timing.tRC", tRC},   {"timing.tRRD", tRRD}, {"timing.tFAW", tFAW},
+      {"timing.tWR", tWR},   {"timing.tWTR", tWTR}, {"timing.tRTP", tRTP}, {"timing.tCCD", tCCD},
+      {"timing.tRTRS", tRTRS}, {"timing.tRFC", tRFC}, {"timing.tREFI", tREFI}};
+  for (const auto& [field, v] : timings)
+    if (v > limits::kMaxDramTimingCycles)
+      fail("DRAM config: {} = {} cycles is over the limit of {} cycles", field, v, limits::kMaxDramTimingCycles);
+  if (queue_depth_bursts > limits::kMaxDramQueueBursts)
+    fail("DRAM config: controller.queue_depth_bursts = {} is over the limit of {}", queue_depth_bursts,
+         limits::kMaxDramQueueBursts);
+  if (uint64_t{channels} * ranks * banks > limits::kMaxDramBanks)
+    fail("DRAM config: {} channels x {} ranks x {} banks is over the limit of {} banks", channels, ranks, banks,
+         limits::kMaxDramBanks);
   if (tRC < tRAS + tRP) fail("DRAM config: timing.tRC = {} is less than tRAS + tRP = {}", tRC, tRAS + tRP);
   if (refresh && tREFI <= tRFC) fail("DRAM config: timing.tREFI = {} must exceed tRFC = {}", tREFI, tRFC);
   if (!(VDD_V > 0.0)) fail("DRAM config: power.VDD_V = {} must be positive", VDD_V);
@@ -260,11 +279,11 @@ DramConfig load_dram_config(const std::filesystem::path& path) {
 std::filesystem::path find_dram_preset(const std::string& name_or_path,
                                        const std::vector<std::filesystem::path>& search_dirs) {
   namespace fs = std::filesystem;
-  if (name_or_path.empty()) fail("--preset: no preset name given");
+  if (name_or_path.empty()) fail("no DRAM preset name given");
   std::error_code ec;
   if (fs::is_regular_file(name_or_path, ec)) return name_or_path;
   bool looks_like_path = name_or_path.find('/') != std::string::npos || name_or_path.ends_with(".yaml");
-  if (looks_like_path) fail("--preset: file '{}' does not exist", name_or_path);
+  if (looks_like_path) fail("DRAM preset file '{}' does not exist", name_or_path);
   std::set<std::string> available;
   std::string searched;
   for (const fs::path& dir : search_dirs) {
@@ -280,7 +299,7 @@ std::filesystem::path find_dram_preset(const std::string& name_or_path,
   }
   std::string names;
   for (const std::string& n : available) names += (names.empty() ? "" : ", ") + n;
-  fail("--preset: no preset named '{}' (searched {}; available: {})", name_or_path,
+  fail("no DRAM preset named '{}' (searched {}; available: {})", name_or_path,
        searched.empty() ? "nothing" : searched, names.empty() ? "none" : names);
 }
 

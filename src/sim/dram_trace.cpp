@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/limits.h"
 
 namespace edrnr::sim {
 namespace {
@@ -65,6 +66,9 @@ std::vector<DramTraceRecord> parse_dram_trace(std::string_view text, const std::
       fail("{}:{}: request type '{}' must be READ or WRITE", origin, line_no, w[1]);
     }
     if (!parse_u64(w[2], 10, r.cycle)) fail("{}:{}: cycle '{}' is not a whole number", origin, line_no, w[2]);
+    if (r.cycle > limits::kMaxDramTraceCycle)
+      fail("{}:{}: cycle {} is over the limit of {} DRAM clocks for a trace request", origin, line_no, r.cycle,
+           limits::kMaxDramTraceCycle);
     if (!records.empty() && r.cycle < records.back().cycle) {
       fail("{}:{}: cycle {} is earlier than the previous request's cycle {} (the trace must be in time order)", origin,
            line_no, r.cycle, records.back().cycle);
@@ -75,7 +79,7 @@ std::vector<DramTraceRecord> parse_dram_trace(std::string_view text, const std::
 }
 
 std::vector<DramTraceRecord> load_dram_trace(const std::filesystem::path& path) {
-  return parse_dram_trace(read_file_text(path), path.string());
+  return parse_dram_trace(read_file_text(path, limits::kMaxTraceFileBytes), path.string());
 }
 
 DramRequestSource trace_source(std::vector<DramTraceRecord> records) {
@@ -129,6 +133,8 @@ uint64_t run_dram_workload(DramSystem& dram, const DramRequestSource& source) {
   uint64_t accepted = 0;
   uint64_t last_progress = dram.cycle();
   while (have || !dram.idle()) {
+    // Nothing in flight until the next arrival: jump there (exactly as ticking).
+    if (have && dram.idle() && next.cycle > dram.cycle()) dram.advance_idle(next.cycle);
     while (have && next.cycle <= dram.cycle()) {
       uint64_t address = next.address - next.address % burst_bytes;
       if (address >= c.capacity_bytes()) {

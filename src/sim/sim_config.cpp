@@ -5,6 +5,7 @@
 
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/limits.h"
 
 namespace edrnr::sim {
 
@@ -129,9 +130,9 @@ void read_dram(const YAML::Node& v, const std::string& at, const fs::path& base_
   if (!base_dir.empty()) dirs.push_back(base_dir / ".." / "dram");
   dirs.insert(dirs.end(), search_dirs.begin(), search_dirs.end());
   const fs::path candidate = resolve(name, base_dir);
-  const fs::path path =
-      fs::exists(candidate) && fs::is_regular_file(candidate) ? candidate : find_dram_preset(name, dirs);
   try {
+    const fs::path path =
+        fs::exists(candidate) && fs::is_regular_file(candidate) ? candidate : find_dram_preset(name, dirs);
     m.dram = load_dram_config(path);
   } catch (const Error& e) {
     fail("{}: {}", at, e.what());
@@ -212,13 +213,38 @@ std::vector<OperatingPoint> table1_points() {
 
 }  // namespace
 
+void check_chip_limits(const ChipConfig& c) {
+  using namespace limits;
+  auto in = [](int64_t v, int64_t lo, int64_t hi, const char* field, const char* unit) {
+    if (v < lo || v > hi)
+      fail("chip config {} {}: must be between {} and {} {} (limit)", field, v, lo, hi, unit);
+  };
+  in(c.rp_buffer_capacity, 1, kMaxRpBufferCapacity, "rp_buffer_capacity", "RPs");
+  in(c.rp_rob.entries, 1, kMaxQueueEntries, "rp_rob.entries", "entries");
+  in(c.rp_rob.entry_depth, 1, kMaxQueueEntries, "rp_rob.entry_depth", "RPs");
+  in(c.rp_rob.recent_tags, 0, kMaxQueueEntries, "rp_rob.recent_tags", "tags");
+  in(c.ooo_queue_depth, 1, kMaxQueueEntries, "ooo_queue_depth", "entries");
+  in(c.feature_cache_bytes, 1, kMaxCacheBytes, "feature_cache.bytes", "bytes");
+  in(c.mshr_entries, 1, kMaxQueueEntries, "feature_cache.mshr_entries", "entries");
+  in(c.mlp_cache_bytes, 1, kMaxCacheBytes, "mlp_cache_bytes", "bytes");
+  in(c.micro_grid_cache_bytes, 0, kMaxCacheBytes, "micro_grid_cache_bytes", "bytes");
+  in(c.functional_fill_latency_issues, 0, kMaxLatencyCycles, "functional_fill_latency_issues", "issues");
+  if (!(c.step_micro > 0.f) || !std::isfinite(c.step_micro) || c.step_micro > float(kMaxStepMicro))
+    fail("chip config render.step_micro {}: must be positive and at most {} micro voxels (limit)", c.step_micro,
+         kMaxStepMicro);
+}
+
 void validate(const SimConfig& c) {
   edrnr::validate(c.chip);
-  if (!(c.clock_MHz > 0.0) || !std::isfinite(c.clock_MHz))
-    fail("simulator.clock_MHz {} must be a positive number", c.clock_MHz);
+  check_chip_limits(c.chip);
+  if (!(c.clock_MHz >= limits::kMinClockMHz && c.clock_MHz <= limits::kMaxClockMHz))
+    fail("simulator.clock_MHz {}: must be between {} and {} MHz (limit)", c.clock_MHz, limits::kMinClockMHz,
+         limits::kMaxClockMHz);
   const SimTiming& t = c.timing;
   auto at_least = [](int v, int lo, const char* field) {
     if (v < lo) fail("simulator.timing.{} {} must be at least {}", field, v, lo);
+    if (v > limits::kMaxLatencyCycles)
+      fail("simulator.timing.{} {}: over the limit of {}", field, v, limits::kMaxLatencyCycles);
   };
   at_least(t.zorg_cycles_per_rp, 1, "front_end.zorg_cycles_per_rp");
   at_least(t.tsps_position_evals_per_cycle, 1, "front_end.tsps_position_evals_per_cycle");
@@ -242,7 +268,16 @@ void validate(const SimConfig& c) {
   m.dram.validate();
   if (m.max_request_bytes < 1) fail("simulator.memory.max_request_bytes must be at least 1");
   if (m.output_record_bytes < 1) fail("simulator.memory.output_record_bytes must be at least 1");
+  if (m.max_request_bytes > (1u << 20) || m.output_record_bytes > (1u << 20))
+    fail("simulator.memory.max_request_bytes {} and output_record_bytes {}: each must be at most {} bytes (limit)",
+         m.max_request_bytes, m.output_record_bytes, 1u << 20);
   auto check_cache = [](const SimCacheConfig& s, const char* name, int64_t size_bytes) {
+    if (s.line_bytes > uint64_t(limits::kMaxCacheBytes) || s.ways > uint64_t(limits::kMaxCacheWays) ||
+        s.mshr_entries > size_t(limits::kMaxQueueEntries) || s.hit_latency_cycles > uint64_t(limits::kMaxLatencyCycles))
+      fail("simulator.memory.{}: line_bytes {}, ways {}, mshr_entries {}, hit_latency_cycles {}: over the limits "
+           "({} bytes, {} ways, {} entries, {} cycles)",
+           name, s.line_bytes, s.ways, s.mshr_entries, s.hit_latency_cycles, limits::kMaxCacheBytes,
+           limits::kMaxCacheWays, limits::kMaxQueueEntries, limits::kMaxLatencyCycles);
     CacheConfig cc;
     cc.name = name;
     cc.size_bytes = uint64_t(size_bytes);
@@ -269,6 +304,9 @@ void validate(const SimConfig& c) {
     if (!(p.frequency_MHz > last) || !std::isfinite(p.frequency_MHz))
       fail("simulator.operating_points[{}].clock_MHz {} must be positive and above the previous point's", i,
            p.frequency_MHz);
+    if (!(p.frequency_MHz >= limits::kMinClockMHz && p.frequency_MHz <= limits::kMaxClockMHz))
+      fail("simulator.operating_points[{}].clock_MHz {}: must be between {} and {} MHz (limit)", i, p.frequency_MHz,
+           limits::kMinClockMHz, limits::kMaxClockMHz);
     if (!(p.voltage_V > 0.0) || !std::isfinite(p.voltage_V))
       fail("simulator.operating_points[{}].voltage_V {} must be positive", i, p.voltage_V);
     last = p.frequency_MHz;
@@ -282,8 +320,11 @@ SimConfig sim_config_from_yaml(const YAML::Node& node, std::string_view where_vi
   SimConfig c;
   c.operating_points = table1_points();
   c.chip = chip_config_from_yaml(node, where);
-  const YAML::Node s = node && node.IsMap() ? node["simulator"] : YAML::Node();
-  if (s) {
+  const bool has_simulator = node && node.IsMap() && node["simulator"];
+  const YAML::Node s = has_simulator ? node["simulator"] : YAML::Node();
+  if (has_simulator && s.IsNull())
+    fail("{}.simulator: the section is empty; give a map of simulator settings or leave it out", where);
+  if (has_simulator) {
     for_each_key(s, where + ".simulator", {"clock_MHz", "timing", "memory", "energy", "operating_points", "statistics",
                                                      "sram_budget_bytes"},
                  [&](const std::string& k, const YAML::Node& v, const std::string& at) {
@@ -306,7 +347,7 @@ SimConfig sim_config_from_yaml(const YAML::Node& node, std::string_view where_vi
     read_dram(YAML::Node(std::string(kDefaultDramPreset)), where + ".simulator.memory.dram (default)", base_dir,
               dram_search_dirs, c.memory);
   if (!base_dir.empty()) {
-    const bool has_energy = s && s["energy"];
+    const bool has_energy = has_simulator && s["energy"];
     const fs::path events = base_dir / ".." / "energy" / "events.csv",
                    leakage = base_dir / ".." / "energy" / "leakage.csv";
     if (!has_energy && fs::is_regular_file(events)) c.energy.events_csv = events.lexically_normal();
@@ -328,6 +369,9 @@ SimConfig load_sim_config(const fs::path& path, const std::vector<fs::path>& dra
   } catch (const YAML::Exception& e) {
     fail("{}: not valid YAML: {}", path.string(), e.what());
   }
+  if (!node.IsMap())
+    fail("{}: {}; a chip preset is a YAML map of settings (see configs/chip/edr_nr_40nm.yaml)", path.string(),
+         node.IsNull() ? "the file is empty" : node.IsSequence() ? "the file holds a list" : "the file holds a single value");
   return sim_config_from_yaml(node, path.string(), path.parent_path(), dram_search_dirs);
 }
 

@@ -2,6 +2,11 @@
 
 #include <zlib.h>
 
+#include <algorithm>
+
+#include "core/file_io.h"
+#include "core/limits.h"
+
 namespace edrnr::train {
 namespace {
 
@@ -26,6 +31,20 @@ void append(std::vector<uint8_t>& out, const T& v) {
 }
 
 }  // namespace
+
+std::vector<uint8_t> read_checkpoint_file(const std::filesystem::path& path) {
+  InputFile f(path);
+  std::vector<uint8_t> bytes(kHeaderBytes);
+  bytes.resize(f.read(bytes.data(), kHeaderBytes));
+  if (bytes.size() < sizeof kMagic || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0)
+    fail("{}: not an edrnr training checkpoint (bad magic)", path.string());
+  if (f.regular_size() >= 0 && uint64_t(f.regular_size()) > limits::kMaxCheckpointBytes)
+    fail("{}: {} bytes, over the limit of {} bytes for a checkpoint", path.string(), f.regular_size(),
+         limits::kMaxCheckpointBytes);
+  if (!f.read_rest(bytes, limits::kMaxCheckpointBytes))
+    fail("{}: goes on past the limit of {} bytes for a checkpoint", path.string(), limits::kMaxCheckpointBytes);
+  return bytes;
+}
 
 void CheckpointWriter::put_bytes(const std::string& name, const void* data, size_t bytes) {
   append(body_, uint32_t(name.size()));

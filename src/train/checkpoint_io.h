@@ -5,6 +5,7 @@
 // host layout (x86-64 and AArch64).
 #include <cstdint>
 #include <cstring>
+#include <filesystem>
 #include <map>
 #include <string>
 #include <string_view>
@@ -15,6 +16,11 @@
 namespace edrnr::train {
 
 inline constexpr uint32_t kCheckpointVersion = 1;
+
+// Reads a checkpoint file for CheckpointReader: a file that does not start
+// with the magic is refused after its first bytes, one larger than
+// limits::kMaxCheckpointBytes before it is read. Throws Error naming the file.
+std::vector<uint8_t> read_checkpoint_file(const std::filesystem::path& path);
 
 class CheckpointWriter {
  public:
@@ -41,6 +47,12 @@ class CheckpointReader {
   // Validates magic, version, sizes and CRC; throws Error naming `source`.
   CheckpointReader(const std::vector<uint8_t>& bytes, std::string source);
   bool has(const std::string& name) const { return sections_.count(name) != 0; }
+  // The section names, sorted.
+  std::vector<std::string> names() const {
+    std::vector<std::string> out;
+    for (const auto& [name, bytes] : sections_) out.push_back(name);
+    return out;
+  }
   std::string_view bytes(const std::string& name) const;
   template <class T>
   std::vector<T> get(const std::string& name) const {

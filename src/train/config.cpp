@@ -4,14 +4,22 @@
 #include <fmt/ranges.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <bit>
+#include <cmath>
 #include <functional>
 #include <map>
 
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/limits.h"
+#include "model/model_io.h"
+#include "render/options.h"
 
 namespace edrnr::train {
+
+using limits::kMaxBatchSamples;
+using limits::kMaxRaysPerStep;
 
 MlpArch TrainConfig::mlp_arch() const {
   MlpArch a;
@@ -23,6 +31,21 @@ MlpArch TrainConfig::mlp_arch() const {
   for (int w : color_hidden) a.color_widths.push_back(w);
   a.color_widths.push_back(3);
   return a;
+}
+
+int64_t TrainConfig::freeze_step(int64_t n) const {
+  return std::max<int64_t>(1, int64_t(std::llround(double(n) * (1.0 - per_cv_fraction - qat_fraction))));
+}
+
+uint64_t TrainConfig::main_state_bytes() const {
+  const uint64_t R = uint64_t(micro_res);
+  uint64_t pyramid = 0;
+  for (int r : levels) pyramid += uint64_t(r) * uint64_t(r) * uint64_t(r) * 4 /* channels */ * 12 /* value, m, v */;
+  return R * R * R * 4 /* density */ + R * R * R / 8 /* bitmap */ + pyramid;
+}
+
+uint64_t TrainConfig::block_state_bytes(uint64_t blocks) const {
+  return blocks * uint64_t(kBlockVerts) * uint64_t(feature_channels()) * 16;
 }
 
 void TrainConfig::validate() const {
@@ -39,6 +62,10 @@ void TrainConfig::validate() const {
     if (r <= 0 || r > micro_res || micro_res % r || !std::has_single_bit(unsigned(micro_res / r)))
       fail("train config: levels entry {} must divide micro_res {} by a power of two", r, micro_res);
   if (geo_features < 1) fail("train config: geo_features must be at least 1");
+  if (geo_features > 256) fail("train config: geo_features {} is over the limit of 256", geo_features);
+  if (levels.size() * 4 > size_t(kMaxFeatureChannels))
+    fail("train config: {} levels make {} feature channels, over the limit of {}", levels.size(), levels.size() * 4,
+         kMaxFeatureChannels);
   for (int w : density_hidden)
     if (w < 1 || w > 256) fail("train config: density_hidden widths must be in [1, 256]");
   for (int w : color_hidden)
@@ -48,14 +75,36 @@ void TrainConfig::validate() const {
     fail("train config: the MLP needs {} bytes in INT8, more than the {}-byte MLP cache", mlp_arch().q8_bytes(),
          kMlpCacheBytes);
   if (!(step_micro > 0.f)) fail("train config: step_micro must be positive");
+  check_step_micro(step_micro, micro_res, "train config: step_micro");
   if (!(transmittance_min > 0.f && transmittance_min < 1.f)) fail("train config: transmittance_min must be in (0, 1)");
   if (iters < 1) fail("train config: iters must be at least 1");
+  if (freeze_step(iters) >= iters) {
+    const double after = double(per_cv_fraction) + double(qat_fraction);
+    if (!(after > 0.0))
+      fail("train config: per_cv_fraction and qat_fraction are both 0: no step would follow the occupancy freeze, "
+           "so no model could be exported");
+    // From n >= 1/after + 1 on, at least one step follows the freeze.
+    const double bound = std::min(1e15, std::ceil(1.0 / after) + 1.0);
+    int64_t least = int64_t(bound);
+    for (int64_t n = 2; n < std::min<int64_t>(least, 1000000); ++n)
+      if (freeze_step(n) < n) {
+        least = n;
+        break;
+      }
+    fail("train config: iters {} (--iters or the preset) is too few: training would end before the occupancy "
+         "freezes at step {} (after {:.0f} % of the steps; per_cv_fraction and qat_fraction are the rest), so no "
+         "model could be exported; give at least {} steps",
+         iters, freeze_step(iters), 100.0 * (1.0 - per_cv_fraction - qat_fraction), least);
+  }
   if (minutes < 0) fail("train config: minutes must not be negative");
   if (plan_step < 10) fail("train config: plan_step must be at least 10");
   if (!(per_cv_fraction >= 0.f && qat_fraction >= 0.f && per_cv_fraction + qat_fraction < 1.f))
     fail("train config: per_cv_fraction and qat_fraction must be >= 0 and sum to less than 1");
-  if (batch_samples < 1024) fail("train config: batch_samples must be at least 1024");
+  if (batch_samples < 1024 || batch_samples > kMaxBatchSamples)
+    fail("train config: batch_samples {} must be between 1024 and {} (limit)", batch_samples, kMaxBatchSamples);
   if (min_rays < 1 || max_rays < min_rays) fail("train config: need 1 <= min_rays <= max_rays");
+  if (max_rays > kMaxRaysPerStep)
+    fail("train config: max_rays {} is over the limit of {} rays per step", max_rays, kMaxRaysPerStep);
   if (!(lr_features > 0.f) || !(lr_mlp > 0.f)) fail("train config: learning rates must be positive");
   if (!(lr_final > 0.f && lr_final <= 1.f)) fail("train config: lr_final must be in (0, 1]");
   if (lr_warmup < 0) fail("train config: lr_warmup must not be negative");
@@ -74,6 +123,12 @@ void TrainConfig::validate() const {
   if (downscale < 1) fail("train config: downscale must be at least 1");
   for (float b : background)
     if (!(b >= 0.f && b <= 1.f)) fail("train config: background values must be in [0, 1]");
+  if (!(max_state_gib > 0.0 && max_state_gib <= 1024.0))
+    fail("train config: max_state_gib {} must be in (0, 1024]", max_state_gib);
+  if (main_state_bytes() > max_state_bytes())
+    fail("train config: micro_res {} with levels [{}] needs {:.2f} GiB for the occupancy grid and the feature "
+         "pyramid, over the limit max_state_gib = {} GiB",
+         micro_res, fmt::join(levels, ", "), double(main_state_bytes()) / double(uint64_t{1} << 30), max_state_gib);
 }
 
 namespace {
@@ -155,6 +210,7 @@ const std::map<std::string, Field>& fields() {
       {"aabb_keep", scalar(&TrainConfig::aabb_keep)},
       {"prune_weight", scalar(&TrainConfig::prune_weight)},
       {"quant_refit_every", scalar(&TrainConfig::quant_refit_every)},
+      {"max_state_gib", scalar(&TrainConfig::max_state_gib)},
       {"seed", scalar(&TrainConfig::seed)},
       {"downscale", scalar(&TrainConfig::downscale)},
       {"split", scalar(&TrainConfig::split)},

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/limits.h"
 #include "core/vec.h"
 #include "model/scene_model.h"
 
@@ -62,6 +63,11 @@ struct TrainConfig {
   // --- quantization ---
   int quant_refit_every = 16;  // steps between refits of the INT4 feature ranges
 
+  // --- memory ---
+  // The trainer's state (feature pyramid, occupancy, feature blocks with their
+  // Adam moments) may not exceed this; checked when the run starts and at the freeze.
+  double max_state_gib = limits::kDefaultTrainStateGiB;
+
   // --- run ---
   uint64_t seed = 0;
   int downscale = 1;  // image downscale factor when loading a dataset
@@ -70,6 +76,15 @@ struct TrainConfig {
   MlpArch mlp_arch() const;
   int feature_channels() const { return 4 * int(levels.size()); }
   float delta() const { return step_micro * (scene_box.hi.x - scene_box.lo.x) / float(micro_res); }
+  // The step at which the occupancy freezes (the main phase ends) for `n` steps.
+  int64_t freeze_step(int64_t n) const;
+  // Bytes of the main phase's state: the occupancy grid and the feature
+  // pyramid with its two Adam moments.
+  uint64_t main_state_bytes() const;
+  // Bytes of the per-CV and quantization phases' state for `blocks` feature
+  // blocks: values, two Adam moments and the float snapshot.
+  uint64_t block_state_bytes(uint64_t blocks) const;
+  uint64_t max_state_bytes() const { return uint64_t(max_state_gib * double(uint64_t{1} << 30)); }
   // Throws Error naming the first invalid field.
   void validate() const;
 };

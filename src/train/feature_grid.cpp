@@ -207,7 +207,10 @@ int Int4Channel::quantize(float x) const {
   // clamped far inside that), the same as nearbyint without a library call.
   const float t = std::clamp(x * inv_scale, -64.f, 64.f);
   const float r = (t + 12582912.f) - 12582912.f;
-  return int(std::clamp(r + float(zero_point), 0.f, 15.f));
+  // The clamp written out so that a NaN (a diverged value) gives code 0
+  // instead of an undefined conversion; every other value as std::clamp.
+  const float v = r + float(zero_point);
+  return v >= 15.f ? 15 : v > 0.f ? int(v) : 0;
 }
 
 Int4Channel int4_channel_for_range(float lo, float hi) {
@@ -215,9 +218,13 @@ Int4Channel int4_channel_for_range(float lo, float hi) {
   hi = std::max(hi, 0.f);
   Int4Channel q;
   q.scale = (hi - lo) / 15.f;
-  if (!(q.scale > 0.f) || !std::isfinite(q.scale)) q.scale = 1.f;
+  // (A range so small that 1 / scale overflows is as good as empty.)
+  if (!(q.scale > 0.f) || !std::isfinite(q.scale) || !std::isfinite(1.f / q.scale)) q.scale = 1.f;
   q.inv_scale = 1.f / q.scale;
-  q.zero_point = std::clamp(int(std::nearbyint(-lo * q.inv_scale)), 0, 15);
+  // Clamped before the conversion: a huge or non-finite range (a corrupt
+  // checkpoint) must not overflow the int. The same result for every other.
+  const float zp = std::nearbyint(-lo * q.inv_scale);
+  q.zero_point = zp >= 15.f ? 15 : zp > 0.f ? int(zp) : 0;
   return q;
 }
 

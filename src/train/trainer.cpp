@@ -4,6 +4,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -239,9 +240,7 @@ struct Trainer::State {
     n_rays = int(std::clamp<int64_t>(cfg.batch_samples / 256, cfg.min_rays, cfg.max_rays));
   }
 
-  int64_t freeze_step() const {
-    return std::max<int64_t>(1, int64_t(std::llround(double(iters) * (1.0 - cfg.per_cv_fraction - cfg.qat_fraction))));
-  }
+  int64_t freeze_step() const { return cfg.freeze_step(iters); }
   int64_t qat_step() const {
     return std::max(freeze_step(), int64_t(std::llround(double(iters) * (1.0 - cfg.qat_fraction))));
   }
@@ -834,6 +833,14 @@ struct Trainer::State {
     for (size_t i = 0; i < fine.size(); ++i)
       if (fine.get(i)) fine_index.push_back(uint32_t(i));
     const int fr = cfg.micro_res / kMicroPerFine;
+    // Before the blocks are allocated: an occupancy grid that has not emptied
+    // yet (too few steps) would need a block for nearly every fine voxel.
+    const uint64_t state_bytes = cfg.block_state_bytes(fine_index.size());
+    if (state_bytes > cfg.max_state_bytes())
+      fail("at the freeze (step {}) the occupancy grid still holds {} of its {} fine voxels: their feature blocks need "
+           "{:.2f} GiB of training state, over the limit max_state_gib = {} GiB; train for more steps (--iters) so "
+           "that empty space is found, or raise max_state_gib in the config",
+           step, fine_index.size(), fine.size(), double(state_bytes) / double(uint64_t{1} << 30), cfg.max_state_gib);
     std::vector<float> values(fine_index.size() * kBlockVerts * size_t(F));
     const int n_blocks = int(fine_index.size());
 #pragma omp parallel for schedule(dynamic, 16)
@@ -1058,7 +1065,8 @@ struct Trainer::State {
   // --- export ---------------------------------------------------------------
 
   SceneModel make_model(bool quantized) const {
-    if (phase == Phase::Main) fail("the model cannot be exported before the occupancy is frozen");
+    if (phase == Phase::Main || cv_to_mlp.empty())
+      fail("the model cannot be exported before the occupancy is frozen");
     SceneModel m;
     m.scene_box = cfg.scene_box;
     m.micro_res = cfg.micro_res;
@@ -1075,7 +1083,8 @@ struct Trainer::State {
     m.mlp_coarse_index = mlp_cv;
     const bool have_snapshot = phase >= Phase::Quantize && !float_blocks.empty();
     if (quantized) {
-      const auto q = phase >= Phase::Quantize ? feature_quant : blocks.fit_quantization();
+      // Without a quantization-aware phase (qat_fraction 0) the ranges are fitted now.
+      const auto q = phase >= Phase::Quantize && !feature_quant.empty() ? feature_quant : blocks.fit_quantization();
       const auto& v = blocks.values();
       const size_t n = v.size();
       m.features_q4.assign((n + 1) / 2, 0);
@@ -1188,8 +1197,28 @@ struct Trainer::State {
     occ_updates = r.get_value<int64_t>("occ_updates");
     feature_adam_t = r.get_value<int64_t>("feature_adam_t");
     mlp_adam_t = r.get_value<int64_t>("mlp_adam_t");
+    // Every value a later step indexes or sizes with is checked (a checkpoint
+    // that passed its CRC may still have been made by another build, or edited).
+    auto bad = [&](const char* what, auto value) {
+      fail("{}: the checkpoint's {} ({}) is out of range (corrupt or from another edrnr)", r.source(), what, value);
+    };
+    if (iters < 1 || iters > (int64_t{1} << 40)) bad("step count", iters);
+    if (step < 0 || step > iters) bad("step", step);
+    if ((phase == Phase::Done) != (step == iters)) bad("phase", phase_name(phase));
+    if (phase == Phase::Main && step > freeze_step()) bad("main-phase step", step);
+    if (n_rays < cfg.min_rays || n_rays > cfg.max_rays) bad("ray count", n_rays);
+    if (occ_updates < 0 || feature_adam_t < 0 || mlp_adam_t < 0) bad("update counters", occ_updates);
+    if (!std::isfinite(mse_ema)) bad("running loss", mse_ema);
     auto expect_size = [&](const char* name, size_t got, size_t want) {
       if (got != want) fail("{}: section '{}' has {} items, expected {}", r.source(), name, got, want);
+    };
+    // Parameters, their Adam moments and snapshots: finite numbers only.
+    auto floats = [&](const std::string& name) {
+      std::vector<float> v = r.get<float>(name);
+      for (size_t i = 0; i < v.size(); ++i)
+        if (!std::isfinite(v[i]))
+          fail("{}: section '{}' item {} is not a finite number (corrupt checkpoint)", r.source(), name, i);
+      return v;
     };
     occ.density = r.get<float>("occ_density");
     expect_size("occ_density", occ.density.size(), size_t(cfg.micro_res) * cfg.micro_res * cfg.micro_res);
@@ -1201,15 +1230,18 @@ struct Trainer::State {
     expect_size("occ_aabb", aabb.size(), 6);
     occ.aabb_lo = {aabb[0], aabb[1], aabb[2]};
     occ.aabb_hi = {aabb[3], aabb[4], aabb[5]};
+    for (int a = 0; a < 3; ++a)
+      if (occ.aabb_known && (aabb[a] < 0 || aabb[a] > aabb[3 + a] || aabb[3 + a] >= cfg.micro_res))
+        bad("object AABB", fmt::format("[{}, {}]", aabb[a], aabb[3 + a]));
     occ.rebuild_macro();
     if (phase == Phase::Main) {
       pyramid = FeaturePyramid(cfg.micro_res, cfg.levels, cfg.seed, 0.f);
       for (size_t li = 0; li < pyramid.levels().size(); ++li) {
         auto& L = pyramid.levels()[li];
         const size_t n = L.value.size();
-        L.value = r.get<float>(fmt::format("level{}_value", li));
-        L.adam.m = r.get<float>(fmt::format("level{}_m", li));
-        L.adam.v = r.get<float>(fmt::format("level{}_v", li));
+        L.value = floats(fmt::format("level{}_value", li));
+        L.adam.m = floats(fmt::format("level{}_m", li));
+        L.adam.v = floats(fmt::format("level{}_v", li));
         expect_size("level values", L.value.size(), n);
         expect_size("level Adam m", L.adam.m.size(), n);
         expect_size("level Adam v", L.adam.v.size(), n);
@@ -1217,9 +1249,9 @@ struct Trainer::State {
       n_mlps = 1;
     } else {
       auto fine_index = r.get<uint32_t>("block_fine_index");
-      blocks = BlockFeatures(cfg.micro_res, F, std::move(fine_index), r.get<float>("block_value"));
-      blocks.adam().m = r.get<float>("block_m");
-      blocks.adam().v = r.get<float>("block_v");
+      blocks = BlockFeatures(cfg.micro_res, F, std::move(fine_index), floats("block_value"));
+      blocks.adam().m = floats("block_m");
+      blocks.adam().v = floats("block_v");
       expect_size("block_m", blocks.adam().m.size(), blocks.values().size());
       expect_size("block_v", blocks.adam().v.size(), blocks.values().size());
       mlp_cv = r.get<uint32_t>("mlp_cv");
@@ -1230,8 +1262,27 @@ struct Trainer::State {
         cv_to_mlp[mlp_cv[i]] = int32_t(i);
       }
       n_mlps = std::max<int>(1, int(mlp_cv.size()));
+      // Every occupied micro voxel must have its feature block and its MLP
+      // (training looks both up for each sample).
+      const int R = cfg.micro_res, fr = R / kMicroPerFine;
+      const auto& words = occ.micro.words();
+      for (size_t w = 0; w < words.size(); ++w)
+        for (uint64_t bits = words[w]; bits; bits &= bits - 1) {
+          const size_t i = w * 64 + size_t(std::countr_zero(bits));
+          const int x = int(i % size_t(R)), y = int(i / size_t(R) % size_t(R)), z = int(i / (size_t(R) * size_t(R)));
+          const uint32_t fine = linear_index(x / kMicroPerFine, y / kMicroPerFine, z / kMicroPerFine, fr);
+          if (blocks.block_of_fine(fine) < 0 || cv_to_mlp[size_t(linear_index(x >> 5, y >> 5, z >> 5, cr))] < 0)
+            bad("occupied micro voxel without a feature block or MLP", fmt::format("{}, {}, {}", x, y, z));
+        }
     }
     auto q = r.get<float>("feature_quant");
+    if (!q.empty() && q.size() != 2 * size_t(F)) expect_size("feature_quant", q.size(), 2 * size_t(F));
+    if (q.empty() && phase == Phase::Quantize) expect_size("feature_quant", q.size(), 2 * size_t(F));
+    for (size_t i = 0; i + 1 < q.size(); i += 2)
+      if (!(q[i] > 0.f) || !std::isfinite(q[i]) || !std::isfinite(1.f / q[i]) ||
+          !(q[i + 1] >= 0.f && q[i + 1] <= 15.f) ||
+          q[i + 1] != std::floor(q[i + 1]))
+        bad("INT4 channel", fmt::format("scale {}, zero point {}", q[i], q[i + 1]));
     feature_quant.clear();
     for (size_t i = 0; i + 1 < q.size(); i += 2) {
       Int4Channel c = int4_channel_for_range(0.f, 0.f);
@@ -1241,18 +1292,25 @@ struct Trainer::State {
       feature_quant.push_back(c);
     }
     if (phase == Phase::Quantize || phase == Phase::Done) blocks.set_quantization(feature_quant);
-    mlp_params = r.get<float>("mlp_params");
-    mlp_m = r.get<float>("mlp_m");
-    mlp_v = r.get<float>("mlp_v");
+    mlp_params = floats("mlp_params");
+    mlp_m = floats("mlp_m");
+    mlp_v = floats("mlp_v");
     expect_size("mlp_params", mlp_params.size(), size_t(n_mlps) * layout.param_count);
     expect_size("mlp_m", mlp_m.size(), mlp_params.size());
     expect_size("mlp_v", mlp_v.size(), mlp_params.size());
-    layer_in_max = r.get<float>("layer_in_max");
+    layer_in_max = floats("layer_in_max");
+    const size_t n_layers = layout.density.size() + layout.color.size();
+    if (phase == Phase::Quantize) expect_size("layer_in_max", layer_in_max.size(), size_t(n_mlps) * n_layers);
+    if (!layer_in_max.empty()) expect_size("layer_in_max", layer_in_max.size(), size_t(n_mlps) * n_layers);
     if (phase >= Phase::Quantize) update_fake_quantized_mlps();
     max_weight = r.get<float>("max_weight");
     if (!max_weight.empty()) expect_size("max_weight", max_weight.size(), occ.density.size());
-    float_blocks = r.get<float>("float_blocks");
-    float_mlps = r.get<float>("float_mlps");
+    float_blocks = floats("float_blocks");
+    float_mlps = floats("float_mlps");
+    if (!float_blocks.empty() || !float_mlps.empty()) {
+      expect_size("float_blocks", float_blocks.size(), phase == Phase::Main ? 0 : blocks.values().size());
+      expect_size("float_mlps", float_mlps.size(), mlp_params.size());
+    }
   }
 };
 
@@ -1354,6 +1412,19 @@ bool Trainer::run(const TrainOptions& options) {
     write_file_atomic(options.checkpoint_path, s.save());
     log(fmt::format("checkpoint at step {} written to {}", s.step, options.checkpoint_path.string()));
   };
+  // A periodic checkpoint is a safety net: failing to write one (a full disk)
+  // must not end the run it protects. The previous checkpoint stays intact.
+  auto try_periodic_checkpoint = [&]() {
+    try {
+      write_checkpoint();
+    } catch (const Error& e) {
+      const std::string m = fmt::format("checkpoint at step {} not written ({}); training goes on", s.step, e.what());
+      if (options.warn)
+        options.warn(m);
+      else
+        std::fprintf(stderr, "edrnr: warning: %s\n", m.c_str());
+    }
+  };
   Phase last_phase = s.phase;
   bool line_open = false;
   while (s.phase != Phase::Done) {
@@ -1405,7 +1476,7 @@ bool Trainer::run(const TrainOptions& options) {
     if (std::chrono::duration<double>(now - t_checkpoint).count() >= options.checkpoint_minutes * 60.0 &&
         s.phase != Phase::Done) {
       if (line_open) std::fputc('\n', stderr), line_open = false;
-      write_checkpoint();
+      try_periodic_checkpoint();
       t_checkpoint = clock::now();
     }
   }

@@ -45,6 +45,9 @@ struct TrainOptions {
   int64_t stop_after = -1;                       // >= 0: checkpoint and stop once this many steps are done
   const std::atomic<bool>* interrupt = nullptr;  // set (e.g. by SIGINT): checkpoint and stop
   std::function<void(const std::string&)> log;   // one-line messages (phase changes, checkpoints)
+  // Problems the run survives (a periodic checkpoint that could not be
+  // written: the run goes on and tries again at the next one). Unset: stderr.
+  std::function<void(const std::string&)> warn;
 };
 
 struct TrainStats {
@@ -81,7 +84,9 @@ class Trainer {
 
   // Runs steps until training is done, stop_after is reached or interrupt is
   // set; writes checkpoints as options say (always on stop or interrupt).
-  // Returns true when training is done.
+  // Returns true when training is done. A periodic checkpoint that cannot be
+  // written is reported through options.warn and training goes on; the one
+  // written on stop or interrupt throws Error if it cannot be written.
   bool run(const TrainOptions& options);
   // One step (phase changes happen at its start).
   void step();

@@ -167,6 +167,28 @@ TEST_F(ImageFiles, ReadErrorsNameTheFile) {
   expect_error([&] { read_png_rgba(dir_ / "cut.png"); }, "cut.png");
 }
 
+// A PNG's size is checked from its header before anything of that size is
+// allocated (issue #16: a 4 MB PNG claiming 30000x30000 needed 11 GB).
+TEST_F(ImageFiles, SizeLimitIsCheckedBeforeDecoding) {
+  // Only the header is valid for these sizes: the image data is a single row.
+  std::string png = make_png(1, 1, 8, 2, 3, std::vector<uint16_t>(3, 7));
+  auto with_size = [&](uint32_t w, uint32_t h) {
+    std::string p = png;
+    std::string ihdr;
+    put_be32(ihdr, w);
+    put_be32(ihdr, h);
+    ihdr += {char(8), char(2), 0, 0, 0};
+    std::string fixed = "\x89PNG\r\n\x1a\n";
+    put_chunk(fixed, "IHDR", ihdr);
+    return fixed + p.substr(8 + 25);  // the original IDAT and IEND
+  };
+  write_file_atomic(dir_ / "huge.png", with_size(30000, 30000));
+  expect_error([&] { read_png_rgba(dir_ / "huge.png"); }, "30000x30000: each side must be 1..16384 pixels");
+  write_file_atomic(dir_ / "many.png", with_size(8192, 8192));
+  expect_error([&] { read_png_rgba(dir_ / "many.png"); }, "67108864 pixels, over the limit of 16777216");
+  expect_error([&] { read_png_rgba(dir_ / "many.png"); }, "many.png");
+}
+
 TEST(Image, CompositeOverBackground) {
   Image rgba(3, 1, 4);
   float px[3][4] = {{0.2f, 0.4f, 0.6f, 0.25f}, {0.3f, 0.7f, 0.9f, 0.f}, {0.3f, 0.7f, 0.9f, 1.f}};

@@ -351,7 +351,34 @@ TEST(ParseTransforms, DownscaleErrors) {
   expect_error([&] { parse(doc, 0); }, {"downscale", "positive integer"});
 }
 
+// Image sizes have a stated limit, checked from the JSON before any image is
+// read (issue #16).
+TEST(ParseTransforms, ImageSizeLimits) {
+  json doc = ngp_json(1);
+  doc["w"] = 30000;
+  expect_error([&] { parse(doc); }, {"'w'", "1 to 16384"});
+  doc["w"] = 8192;
+  doc["h"] = 8192;
+  expect_error([&] { parse(doc); }, {"scene.json", "frames[0]", "67108864 pixels, over the limit of 16777216"});
+  doc["w"] = 4096;
+  doc["h"] = 4096;
+  EXPECT_NO_THROW(parse(doc));
+}
+
 // ---- datasets on disk -----------------------------------------------------------
+
+// All the images of a split are counted before any is decoded.
+TEST_F(DatasetFiles, SplitPixelLimit) {
+  json doc = ngp_json(20);
+  doc["w"] = 4096;
+  doc["h"] = 4096;
+  write_json("transforms_train.json", doc);
+  DatasetOptions o;
+  expect_error([&] { load_dataset(dir_, o); },
+               {"20 images of 16777216 pixels", "335544320 pixels in all, over the limit of 268435456"});
+  o.load_images = false;
+  EXPECT_EQ(load_dataset(dir_, o).frames.size(), 20u);  // cameras only: nothing decoded
+}
 
 TEST_F(DatasetFiles, LoadsAndCompositesRgbaOnBackground) {
   write_png(dir_ / "train" / "r_0.png", rgba_test_image());

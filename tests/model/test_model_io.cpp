@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/file_io.h"
 #include "model/footprint.h"
 #include "model/model_io.h"
 
@@ -712,6 +713,66 @@ TEST(ModelIo, SerializeRejectsInconsistentModels) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("strictly ascending"), std::string::npos) << e.what();
   }
+}
+
+// ---- limits (issue #16) ----
+
+// Metadata nested deeper than the limit is refused when loading (inspect
+// printed it recursively and crashed at 100 000 levels).
+TEST(ModelIoReject, MetadataNestedPastTheLimit) {
+  auto s = split_file(serialize_model(small_model(32, 2)));
+  const int depth = 100000;
+  std::string deep = R"({"a": )" + std::string(size_t(depth), '[') + std::string(size_t(depth), ']') + "}";
+  body(s, "META").assign(deep.begin(), deep.end());
+  EXPECT_PARSE_ERROR(build_file(s), "the JSON nests 100001 levels deep, over the limit of 64");
+  // Brackets inside strings do not count; the limit itself is accepted.
+  std::string ok = R"({"s": "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[", "d": )" +
+                   std::string(63, '[') + std::string(63, ']') + "}";
+  body(s, "META").assign(ok.begin(), ok.end());
+  std::vector<uint8_t> b = build_file(s);
+  EXPECT_EQ(parse_model(b.data(), b.size()).metadata_json, ok);
+}
+
+class ModelFile : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("edrnr_model_file_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "_" +
+            std::to_string(::getpid()));
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::string load_error(const std::filesystem::path& p) {
+    try {
+      load_model(p);
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "(loaded without error)";
+  }
+  std::filesystem::path dir_;
+};
+
+// The header is checked before the rest is read: a file that is not a model
+// (/dev/zero, a folder), claims more than the limit, or whose size differs
+// from its header's total, is refused without reading it all.
+TEST_F(ModelFile, HeaderIsCheckedBeforeTheFileIsRead) {
+  std::vector<uint8_t> good = serialize_model(small_model(32, 2));
+  write_file_atomic(dir_ / "good.edrnr", good);
+  EXPECT_NO_THROW(load_model(dir_ / "good.edrnr"));
+  EXPECT_NE(load_error("/dev/zero").find("not an edrnr model"), std::string::npos);
+  EXPECT_NE(load_error(dir_).find("is a folder, not a file"), std::string::npos) << load_error(dir_);
+  std::vector<uint8_t> huge = good;
+  put_u64(huge, 16, uint64_t{1} << 40);
+  write_file_atomic(dir_ / "huge.edrnr", huge);
+  const std::string m = load_error(dir_ / "huge.edrnr");
+  EXPECT_NE(m.find("total size of 1099511627776 bytes, over the limit of 4294967296"), std::string::npos) << m;
+  std::vector<uint8_t> cut(good.begin(), good.begin() + 100);
+  write_file_atomic(dir_ / "cut.edrnr", cut);
+  EXPECT_NE(load_error(dir_ / "cut.edrnr").find("but there are 100 (truncated or padded file)"), std::string::npos);
+  std::vector<uint8_t> tiny(good.begin(), good.begin() + 12);
+  write_file_atomic(dir_ / "tiny.edrnr", tiny);
+  EXPECT_NE(load_error(dir_ / "tiny.edrnr").find("shorter than the 32-byte header"), std::string::npos);
 }
 
 }  // namespace

@@ -175,5 +175,23 @@ TEST(DramConfig, PresetLookupByNameOrPath) {
   EXPECT_THROW(find_dram_preset("missing/file.yaml", dirs), Error);
 }
 
+// The clock period and every timing value have stated limits; a refusal
+// names the field, the value and the range (issue #16: tCK_ns 1e-9 hung the
+// simulator, 1e9 was reported as "must be positive").
+TEST(DramConfig, TimingLimitsAreStatedAndEnforced) {
+  std::string good = preset_text("ddr3-1600-4gb-x16-64bit");
+  for (const char* bad : {"tCK_ns: 1e-9", "tCK_ns: 1e9", "tCK_ns: 0", "tCK_ns: -1.25", "tCK_ns: .nan"}) {
+    const std::string m = error_of(replace(good, "tCK_ns: 1.25", bad));
+    EXPECT_NE(m.find("timing.tCK_ns"), std::string::npos) << bad << ": " << m;
+    EXPECT_NE(m.find("must be between 0.25 and 20 ns"), std::string::npos) << bad << ": " << m;
+  }
+  EXPECT_EQ(error_of(replace(good, "tCK_ns: 1.25", "tCK_ns: 0.25")), "");
+  EXPECT_EQ(error_of(replace(good, "tCK_ns: 1.25", "tCK_ns: 20")), "");
+  std::string m = error_of(replace(good, "tRFC: ", "tRFC: 3000000 #"));
+  EXPECT_NE(m.find("timing.tRFC = 3000000 cycles is over the limit of 1048576"), std::string::npos) << m;
+  m = error_of(replace(good, "queue_depth_bursts: ", "queue_depth_bursts: 100000 #"));
+  EXPECT_NE(m.find("controller.queue_depth_bursts = 100000 is over the limit of 4096"), std::string::npos) << m;
+}
+
 }  // namespace
 }  // namespace edrnr::sim

@@ -3,7 +3,10 @@
 
 #include <filesystem>
 
+#include <fmt/format.h>
+
 #include "core/error.h"
+#include "core/stats.h"
 #include "sim/dram_trace.h"
 
 namespace edrnr::sim {
@@ -117,6 +120,60 @@ TEST(DramTrace, SyntheticSourcesAreDeterministicAndShaped) {
   EXPECT_NEAR(static_cast<double>(writes), 5000.0, 370.0);
   auto all_writes = collect(stream_source(c, 100, 1.0, 3));
   for (const auto& r : all_writes) EXPECT_EQ(r.op, DramOp::kWrite);
+}
+
+// A request far in the future is refused past the stated limit, and the idle
+// stretch before a late request is jumped over with exactly the result of
+// ticking through it (issue #16: a request at cycle 9e18 hung `edrnr dram`).
+TEST(DramTrace, ArrivalCycleLimit) {
+  const std::string m = error_of("0x0 READ 5\n0x40 READ 9000000000000000000\n");
+  EXPECT_NE(m.find("t.trace:2: cycle 9000000000000000000 is over the limit of 10000000000 DRAM clocks"),
+            std::string::npos)
+      << m;
+  EXPECT_EQ(error_of("0x0 READ 10000000000\n"), "");
+}
+
+// The reference: the workload driver as it was, one tick per DRAM clock.
+uint64_t run_ticking(DramSystem& dram, const DramRequestSource& source) {
+  DramTraceRecord next;
+  bool have = source(next);
+  uint64_t accepted = 0;
+  while (have || !dram.idle()) {
+    while (have && next.cycle <= dram.cycle()) {
+      if (!dram.enqueue(next.op, next.address, 64, accepted)) break;
+      ++accepted;
+      have = source(next);
+    }
+    dram.tick();
+    while (dram.pop_completion()) {
+    }
+  }
+  return accepted;
+}
+
+TEST(DramTrace, IdleGapsAreJumpedWithTheSameResultAsTicking) {
+  DramConfig c = load_dram_config(kPreset);
+  // Bursts, then gaps across several refresh intervals (tREFI), one ending
+  // right at a refresh, some rows left open across a gap.
+  std::string text;
+  const uint64_t refi = c.tREFI;
+  for (uint64_t t : {uint64_t{0}, uint64_t{3}, uint64_t{40}, refi - 1, refi, 5 * refi + 17, 5 * refi + 18,
+                     9 * refi + 2, 40 * refi + 123}) {
+    for (int k = 0; k < 6; ++k) text += fmt::format("0x{:x} {} {}\n", (t * 4096 + uint64_t(k) * 8192) % (1u << 30),
+                                                     k % 3 ? "READ" : "WRITE", t);
+  }
+  for (bool refresh : {true, false}) {
+    c.refresh = refresh;
+    StatsRegistry sa, sb;
+    DramSystem a(c, sa), b(c, sb);
+    const uint64_t na = run_dram_workload(a, trace_source(parse_dram_trace(text, "gaps")));
+    const uint64_t nb = run_ticking(b, trace_source(parse_dram_trace(text, "gaps")));
+    a.update_stats();
+    b.update_stats();
+    EXPECT_EQ(na, nb);
+    EXPECT_EQ(a.cycle(), b.cycle());
+    EXPECT_EQ(sa.to_json().dump(), sb.to_json().dump()) << "refresh " << refresh;
+  }
 }
 
 }  // namespace
