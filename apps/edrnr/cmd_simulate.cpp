@@ -26,6 +26,7 @@
 #include "model/model_io.h"
 #include "render/cameras.h"
 #include "render/options.h"
+#include "sim/reproduce_runs.h"
 #include "sim/simulator.h"
 
 namespace edrnr::cli {
@@ -75,21 +76,11 @@ void apply_disable(const std::string& list, ChipConfig& c) {
   while (start <= list.size()) {
     const size_t comma = list.find(',', start);
     const std::string item = list.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    if (item == "zorder")
-      c.switches.z_order = false;
-    else if (item == "aabb")
-      c.switches.aabb = false;
-    else if (item == "lagfirst")
-      c.switches.lag_first = false;
-    else if (item == "reorder")
-      c.switches.rp_reorder = false;
-    else if (item == "ooo")
-      c.switches.ooo_issue = false;
-    else if (item == "balanced")
-      c.bank_mapping = chip::BankMapping::Direct;
-    else
-      fail("--disable '{}': unknown technique '{}' (known: zorder, aabb, lagfirst, reorder, ooo, balanced)", list,
-           item);
+    try {
+      sim::disable_technique(c, item);
+    } catch (const Error& e) {
+      fail("--disable '{}': {}", list, e.what());
+    }
     if (comma == std::string::npos) break;
     start = comma + 1;
   }
