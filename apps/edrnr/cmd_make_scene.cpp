@@ -73,8 +73,8 @@ void run_make_scene(const MakeSceneOptions& o) {
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   fmt::print("{}: {} scene at micro resolution {}: {} occupied micro voxels, {} feature blocks, {} MLPs\n", o.output,
              o.scene, m.micro_res, m.occupancy[int(Tier::Micro)].count(), m.block_count(), m.mlp_count());
-  fmt::print("  forms: {}; {} bytes; {:.2f} s\n", o.quantized_only ? "quantized" : "float and quantized",
-             bytes.size(), seconds);
+  fmt::print("  forms: {}; {} bytes; {:.2f} s\n", o.quantized_only ? "quantized" : "float and quantized", bytes.size(),
+             seconds);
 }
 
 void register_make_scene_cmd(CLI::App& app) {

@@ -178,15 +178,16 @@ void run_simulate(const SimulateOptions& o) {
   // Table I's SRAM budget: a preset whose buffers do not fit is refused
   // before any simulation, unless the user asks to go over (the report says so).
   const sim::SramBudget budget = sim::sram_budget_for(model, cfg);
-  if (o.sram) std::cout << "SRAM budget of " << preset.filename().string() << " for " << o.model << "\n"
-                        << budget.format();
+  if (o.sram)
+    std::cout << "SRAM budget of " << preset.filename().string() << " for " << o.model << "\n" << budget.format();
   if (budget.over_budget()) {
     std::string why;
     for (const std::string& v : budget.violations()) why += "\n  " + v;
     if (!o.allow_over_budget)
-      fail("chip preset '{}' does not fit Table I's on-chip SRAM:{}\n(--sram prints every buffer; "
-           "--allow-over-budget simulates it anyway)",
-           preset.string(), why);
+      fail(
+          "chip preset '{}' does not fit Table I's on-chip SRAM:{}\n(--sram prints every buffer; "
+          "--allow-over-budget simulates it anyway)",
+          preset.string(), why);
     fmt::print("WARNING     over Table I's SRAM budget (--allow-over-budget):{}\n", why);
   }
 

@@ -10,9 +10,9 @@
 #include <csignal>
 #include <filesystem>
 #include <iterator>
-#include <vector>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "commands.h"
 #include "core/error.h"
@@ -65,8 +65,8 @@ void check_outputs(const TrainCmdOptions& o, const std::filesystem::path& checkp
   for (size_t i = 0; i < outs.size(); ++i)
     for (size_t j = i + 1; j < outs.size(); ++j)
       if (same_file(outs[i].path, outs[j].path))
-        fail("{} '{}' and {} '{}' name the same file; each output needs its own", outs[i].flag,
-             outs[i].path.string(), outs[j].flag, outs[j].path.string());
+        fail("{} '{}' and {} '{}' name the same file; each output needs its own", outs[i].flag, outs[i].path.string(),
+             outs[j].flag, outs[j].path.string());
   if (!o.resume.empty())
     for (const Out& out : outs)
       if (std::string(out.flag) != "--checkpoint" && same_file(out.path, o.resume))
@@ -219,9 +219,10 @@ void run_train(const TrainCmdOptions& o) {
           opt.checkpoint_path.string(), o.dataset, o.output, opt.checkpoint_path.string(),
           o.float_output.empty() ? "" : " --float-output " + o.float_output);
     } catch (const Error& e2) {
-      kept = fmt::format("the checkpoint '{}' could not be written either ({}); an earlier checkpoint there, if any, "
-                         "is intact",
-                         opt.checkpoint_path.string(), e2.what());
+      kept = fmt::format(
+          "the checkpoint '{}' could not be written either ({}); an earlier checkpoint there, if any, "
+          "is intact",
+          opt.checkpoint_path.string(), e2.what());
     }
     fail("{}; {}", e.what(), kept);
   }

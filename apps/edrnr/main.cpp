@@ -57,8 +57,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "edrnr: error: %s\n", e.what());
     return 1;
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "edrnr: error: out of memory (an input larger than this machine can hold; "
-                         "docs/reliability.md lists the limits edrnr checks)\n");
+    std::fprintf(stderr,
+                 "edrnr: error: out of memory (an input larger than this machine can hold; "
+                 "docs/reliability.md lists the limits edrnr checks)\n");
     return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "edrnr: internal error: %s\n", e.what());

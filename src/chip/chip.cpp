@@ -74,70 +74,67 @@ ChipConfig chip_config_from_yaml(const YAML::Node& node, std::string_view where_
   const std::string where(where_view);
   ChipConfig c;
   if (!node || node.IsNull()) return c;
-  for_each_key(node, where,
-               {"rp_buffer_capacity", "rp_rob", "ooo_queue_depth", "feature_cache", "mlp_cache_bytes",
-                "micro_grid_cache_bytes", "functional_fill_latency_issues", "render", "switches", "numerics",
-                "simulator"},
-               [&](const std::string& key, const YAML::Node& v, const std::string& at) {
-                 if (key == "rp_buffer_capacity") c.rp_buffer_capacity = scalar<int>(v, at, "an integer");
-                 if (key == "ooo_queue_depth") c.ooo_queue_depth = scalar<int>(v, at, "an integer");
-                 if (key == "mlp_cache_bytes") c.mlp_cache_bytes = scalar<int64_t>(v, at, "an integer");
-                 if (key == "micro_grid_cache_bytes") c.micro_grid_cache_bytes = scalar<int64_t>(v, at, "an integer");
-                 if (key == "functional_fill_latency_issues")
-                   c.functional_fill_latency_issues = scalar<int>(v, at, "an integer");
-                 if (key == "rp_rob")
-                   for_each_key(v, at, {"entries", "entry_depth", "recent_tags", "tag_switch", "switch_when"},
-                                [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                                  if (k == "switch_when") {
-                                    const std::string w = scalar<std::string>(x, a, "retired or idle");
-                                    if (w != "retired" && w != "idle")
-                                      fail("{}: '{}' is not retired or idle", a, w);
-                                    c.rp_rob.switch_when_idle = w == "idle";
-                                    return;
-                                  }
-                                  if (k == "tag_switch") {
-                                    c.rp_rob.tag_switch =
-                                        parse_tag_switch_rule(scalar<std::string>(x, a, "a name"), a);
-                                    return;
-                                  }
-                                  int val = scalar<int>(x, a, "an integer");
-                                  if (k == "entries") c.rp_rob.entries = val;
-                                  if (k == "entry_depth") c.rp_rob.entry_depth = val;
-                                  if (k == "recent_tags") c.rp_rob.recent_tags = val;
-                                });
-                 if (key == "feature_cache")
-                   for_each_key(v, at, {"bytes", "mshr_entries", "bank_mapping"},
-                                [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                                  if (k == "bytes") c.feature_cache_bytes = scalar<int64_t>(x, a, "an integer");
-                                  if (k == "mshr_entries") c.mshr_entries = scalar<int>(x, a, "an integer");
-                                  if (k == "bank_mapping")
-                                    c.bank_mapping = parse_bank_mapping(scalar<std::string>(x, a, "a name"), a);
-                                });
-                 if (key == "render")
-                   for_each_key(v, at, {"step_micro", "transmittance_min", "background"},
-                                [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                                  if (k == "step_micro") c.step_micro = scalar<float>(x, a, "a number");
-                                  if (k == "transmittance_min") c.transmittance_min = scalar<float>(x, a, "a number");
-                                  if (k == "background") {
-                                    if (!x.IsSequence() || x.size() != 3) fail("{}: expected [r, g, b]", a);
-                                    for (int i = 0; i < 3; ++i)
-                                      c.background[i] = scalar<float>(x[size_t(i)], a, "a number");
-                                  }
-                                });
-                 if (key == "switches")
-                   for_each_key(v, at, {"z_order", "aabb", "lag_first", "rp_reorder", "ooo_issue"},
-                                [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                                  const bool b = scalar<bool>(x, a, "true or false");
-                                  if (k == "z_order") c.switches.z_order = b;
-                                  if (k == "aabb") c.switches.aabb = b;
-                                  if (k == "lag_first") c.switches.lag_first = b;
-                                  if (k == "rp_reorder") c.switches.rp_reorder = b;
-                                  if (k == "ooo_issue") c.switches.ooo_issue = b;
-                                });
-                 if (key == "numerics") c.numerics = numerics_from_yaml(v, at);
-                 // "simulator": timing, memory and energy of the cycle simulator
-                 // (sim/sim_config.h); the functional model does not use it.
-               });
+  for_each_key(
+      node, where,
+      {"rp_buffer_capacity", "rp_rob", "ooo_queue_depth", "feature_cache", "mlp_cache_bytes", "micro_grid_cache_bytes",
+       "functional_fill_latency_issues", "render", "switches", "numerics", "simulator"},
+      [&](const std::string& key, const YAML::Node& v, const std::string& at) {
+        if (key == "rp_buffer_capacity") c.rp_buffer_capacity = scalar<int>(v, at, "an integer");
+        if (key == "ooo_queue_depth") c.ooo_queue_depth = scalar<int>(v, at, "an integer");
+        if (key == "mlp_cache_bytes") c.mlp_cache_bytes = scalar<int64_t>(v, at, "an integer");
+        if (key == "micro_grid_cache_bytes") c.micro_grid_cache_bytes = scalar<int64_t>(v, at, "an integer");
+        if (key == "functional_fill_latency_issues")
+          c.functional_fill_latency_issues = scalar<int>(v, at, "an integer");
+        if (key == "rp_rob")
+          for_each_key(v, at, {"entries", "entry_depth", "recent_tags", "tag_switch", "switch_when"},
+                       [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                         if (k == "switch_when") {
+                           const std::string w = scalar<std::string>(x, a, "retired or idle");
+                           if (w != "retired" && w != "idle") fail("{}: '{}' is not retired or idle", a, w);
+                           c.rp_rob.switch_when_idle = w == "idle";
+                           return;
+                         }
+                         if (k == "tag_switch") {
+                           c.rp_rob.tag_switch = parse_tag_switch_rule(scalar<std::string>(x, a, "a name"), a);
+                           return;
+                         }
+                         int val = scalar<int>(x, a, "an integer");
+                         if (k == "entries") c.rp_rob.entries = val;
+                         if (k == "entry_depth") c.rp_rob.entry_depth = val;
+                         if (k == "recent_tags") c.rp_rob.recent_tags = val;
+                       });
+        if (key == "feature_cache")
+          for_each_key(v, at, {"bytes", "mshr_entries", "bank_mapping"},
+                       [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                         if (k == "bytes") c.feature_cache_bytes = scalar<int64_t>(x, a, "an integer");
+                         if (k == "mshr_entries") c.mshr_entries = scalar<int>(x, a, "an integer");
+                         if (k == "bank_mapping")
+                           c.bank_mapping = parse_bank_mapping(scalar<std::string>(x, a, "a name"), a);
+                       });
+        if (key == "render")
+          for_each_key(v, at, {"step_micro", "transmittance_min", "background"},
+                       [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                         if (k == "step_micro") c.step_micro = scalar<float>(x, a, "a number");
+                         if (k == "transmittance_min") c.transmittance_min = scalar<float>(x, a, "a number");
+                         if (k == "background") {
+                           if (!x.IsSequence() || x.size() != 3) fail("{}: expected [r, g, b]", a);
+                           for (int i = 0; i < 3; ++i) c.background[i] = scalar<float>(x[size_t(i)], a, "a number");
+                         }
+                       });
+        if (key == "switches")
+          for_each_key(v, at, {"z_order", "aabb", "lag_first", "rp_reorder", "ooo_issue"},
+                       [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                         const bool b = scalar<bool>(x, a, "true or false");
+                         if (k == "z_order") c.switches.z_order = b;
+                         if (k == "aabb") c.switches.aabb = b;
+                         if (k == "lag_first") c.switches.lag_first = b;
+                         if (k == "rp_reorder") c.switches.rp_reorder = b;
+                         if (k == "ooo_issue") c.switches.ooo_issue = b;
+                       });
+        if (key == "numerics") c.numerics = numerics_from_yaml(v, at);
+        // "simulator": timing, memory and energy of the cycle simulator
+        // (sim/sim_config.h); the functional model does not use it.
+      });
   try {
     validate(c);
   } catch (const Error& e) {
@@ -306,8 +303,7 @@ class FunctionalChip {
         buffer_(config.rp_buffer_capacity),
         ctu_(model, math_, config.switches.lag_first),
         rob_(RpRobConfig{config.rp_rob.entries, config.rp_rob.entry_depth, config.rp_rob.recent_tags,
-                         config.switches.rp_reorder, config.rp_rob.tag_switch,
-                         config.rp_rob.switch_when_idle}),
+                         config.switches.rp_reorder, config.rp_rob.tag_switch, config.rp_rob.switch_when_idle}),
         ftu_(model, math_, config.switches.lag_first, size_t(config.micro_grid_cache_bytes / 8)),
         ooo_(config.ooo_queue_depth, config.switches.ooo_issue),
         cfiu_(model, n_,

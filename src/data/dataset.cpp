@@ -258,8 +258,8 @@ Dataset load_dataset(const fs::path& root, const DatasetOptions& options) {
   ds.frames = parse_transforms(read_file_text(json_path), root, source, options.downscale);
   if (!options.load_images) return ds;
   // All the images are decoded at full size before any downscale.
-  const int64_t full_pixels = int64_t(ds.frames[0].camera.width) * options.downscale *
-                              int64_t(ds.frames[0].camera.height) * options.downscale;
+  const int64_t full_pixels =
+      int64_t(ds.frames[0].camera.width) * options.downscale * int64_t(ds.frames[0].camera.height) * options.downscale;
   if (full_pixels * int64_t(ds.frames.size()) > limits::kMaxDatasetPixels)
     fail("{}: {} images of {} pixels are {} pixels in all, over the limit of {} pixels for one split", source,
          ds.frames.size(), full_pixels, full_pixels * int64_t(ds.frames.size()), limits::kMaxDatasetPixels);

@@ -77,10 +77,10 @@ void check_step_micro(double step_micro, int micro_res, const std::string& what)
   const double diagonal = std::sqrt(3.0) * double(micro_res);  // micro voxels
   const double samples = std::ceil(diagonal / step_micro);
   if (samples > double(limits::kMaxSamplesPerRay))
-    fail("{} {:.6g}: up to {:.3g} samples per ray at micro resolution {}, over the limit of {} (the smallest step "
-         "here is {:.3g})",
-         what, step_micro, samples, micro_res, limits::kMaxSamplesPerRay,
-         diagonal / double(limits::kMaxSamplesPerRay));
+    fail(
+        "{} {:.6g}: up to {:.3g} samples per ray at micro resolution {}, over the limit of {} (the smallest step "
+        "here is {:.3g})",
+        what, step_micro, samples, micro_res, limits::kMaxSamplesPerRay, diagonal / double(limits::kMaxSamplesPerRay));
 }
 
 }  // namespace edrnr

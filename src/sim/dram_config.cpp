@@ -163,9 +163,9 @@ void DramConfig::validate() const {
   positive("timing.tRFC", tRFC);
   // Every timing value is bounded, so a wait between commands stays short of a hang.
   const std::pair<const char*, uint32_t> timings[] = {
-      {"timing.CL", CL},     {"timing.CWL", CWL},   {"timing.tRCD", tRCD}, {"timing.tRP", tRP},
-      {"timing.tRAS", tRAS}, {"timing.tRC", tRC},   {"timing.tRRD", tRRD}, {"timing.tFAW", tFAW},
-      {"timing.tWR", tWR},   {"timing.tWTR", tWTR}, {"timing.tRTP", tRTP}, {"timing.tCCD", tCCD},
+      {"timing.CL", CL},       {"timing.CWL", CWL},   {"timing.tRCD", tRCD},  {"timing.tRP", tRP},
+      {"timing.tRAS", tRAS},   {"timing.tRC", tRC},   {"timing.tRRD", tRRD},  {"timing.tFAW", tFAW},
+      {"timing.tWR", tWR},     {"timing.tWTR", tWTR}, {"timing.tRTP", tRTP},  {"timing.tCCD", tCCD},
       {"timing.tRTRS", tRTRS}, {"timing.tRFC", tRFC}, {"timing.tREFI", tREFI}};
   for (const auto& [field, v] : timings)
     if (v > limits::kMaxDramTimingCycles)
@@ -299,8 +299,8 @@ std::filesystem::path find_dram_preset(const std::string& name_or_path,
   }
   std::string names;
   for (const std::string& n : available) names += (names.empty() ? "" : ", ") + n;
-  fail("no DRAM preset named '{}' (searched {}; available: {})", name_or_path,
-       searched.empty() ? "nothing" : searched, names.empty() ? "none" : names);
+  fail("no DRAM preset named '{}' (searched {}; available: {})", name_or_path, searched.empty() ? "nothing" : searched,
+       names.empty() ? "none" : names);
 }
 
 std::string dram_config_to_yaml(const DramConfig& c) {

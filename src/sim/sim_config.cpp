@@ -216,8 +216,7 @@ std::vector<OperatingPoint> table1_points() {
 void check_chip_limits(const ChipConfig& c) {
   using namespace limits;
   auto in = [](int64_t v, int64_t lo, int64_t hi, const char* field, const char* unit) {
-    if (v < lo || v > hi)
-      fail("chip config {} {}: must be between {} and {} {} (limit)", field, v, lo, hi, unit);
+    if (v < lo || v > hi) fail("chip config {} {}: must be between {} and {} {} (limit)", field, v, lo, hi, unit);
   };
   in(c.rp_buffer_capacity, 1, kMaxRpBufferCapacity, "rp_buffer_capacity", "RPs");
   in(c.rp_rob.entries, 1, kMaxQueueEntries, "rp_rob.entries", "entries");
@@ -274,10 +273,11 @@ void validate(const SimConfig& c) {
   auto check_cache = [](const SimCacheConfig& s, const char* name, int64_t size_bytes) {
     if (s.line_bytes > uint64_t(limits::kMaxCacheBytes) || s.ways > uint64_t(limits::kMaxCacheWays) ||
         s.mshr_entries > size_t(limits::kMaxQueueEntries) || s.hit_latency_cycles > uint64_t(limits::kMaxLatencyCycles))
-      fail("simulator.memory.{}: line_bytes {}, ways {}, mshr_entries {}, hit_latency_cycles {}: over the limits "
-           "({} bytes, {} ways, {} entries, {} cycles)",
-           name, s.line_bytes, s.ways, s.mshr_entries, s.hit_latency_cycles, limits::kMaxCacheBytes,
-           limits::kMaxCacheWays, limits::kMaxQueueEntries, limits::kMaxLatencyCycles);
+      fail(
+          "simulator.memory.{}: line_bytes {}, ways {}, mshr_entries {}, hit_latency_cycles {}: over the limits "
+          "({} bytes, {} ways, {} entries, {} cycles)",
+          name, s.line_bytes, s.ways, s.mshr_entries, s.hit_latency_cycles, limits::kMaxCacheBytes,
+          limits::kMaxCacheWays, limits::kMaxQueueEntries, limits::kMaxLatencyCycles);
     CacheConfig cc;
     cc.name = name;
     cc.size_bytes = uint64_t(size_bytes);
@@ -325,8 +325,8 @@ SimConfig sim_config_from_yaml(const YAML::Node& node, std::string_view where_vi
   if (has_simulator && s.IsNull())
     fail("{}.simulator: the section is empty; give a map of simulator settings or leave it out", where);
   if (has_simulator) {
-    for_each_key(s, where + ".simulator", {"clock_MHz", "timing", "memory", "energy", "operating_points", "statistics",
-                                                     "sram_budget_bytes"},
+    for_each_key(s, where + ".simulator",
+                 {"clock_MHz", "timing", "memory", "energy", "operating_points", "statistics", "sram_budget_bytes"},
                  [&](const std::string& k, const YAML::Node& v, const std::string& at) {
                    if (k == "clock_MHz") c.clock_MHz = number(v, at);
                    if (k == "timing") read_timing(v, at, c.timing);
@@ -371,7 +371,9 @@ SimConfig load_sim_config(const fs::path& path, const std::vector<fs::path>& dra
   }
   if (!node.IsMap())
     fail("{}: {}; a chip preset is a YAML map of settings (see configs/chip/edr_nr_40nm.yaml)", path.string(),
-         node.IsNull() ? "the file is empty" : node.IsSequence() ? "the file holds a list" : "the file holds a single value");
+         node.IsNull()       ? "the file is empty"
+         : node.IsSequence() ? "the file holds a list"
+                             : "the file holds a single value");
   return sim_config_from_yaml(node, path.string(), path.parent_path(), dram_search_dirs);
 }
 
@@ -447,9 +449,12 @@ YAML::Node sim_config_to_yaml(const SimConfig& c) {
 
 const char* dram_energy_source_name(DramEnergySource s) {
   switch (s) {
-    case DramEnergySource::Events: return "events";
-    case DramEnergySource::Model: return "model";
-    case DramEnergySource::Access: return "access";
+    case DramEnergySource::Events:
+      return "events";
+    case DramEnergySource::Model:
+      return "model";
+    case DramEnergySource::Access:
+      return "access";
   }
   return "?";
 }

@@ -440,7 +440,8 @@ class Engine {
       if (free_slots_.empty()) {
         if (!rob_.empty()) st = UnitState::StallOutput;
       } else if (const auto sched = rob_.schedule()) {
-        if (cfg_.memory.mlp_prefetch && (!prefetch_started_ || sched->tag != prefetch_tag_)) start_mlp_prefetch(sched->tag);
+        if (cfg_.memory.mlp_prefetch && (!prefetch_started_ || sched->tag != prefetch_tag_))
+          start_mlp_prefetch(sched->tag);
         s.rp = sched->rp;
         s.slot = free_slots_.back();
         free_slots_.pop_back();

@@ -83,7 +83,7 @@ struct SimSummary {
   // first sample waits for the data) and n - 1 hits.
   double feature_hit_rate_per_access = 0;
   double mlp_hit_rate_per_access = 0;
-  uint64_t dram_read_bytes = 0;       // bursts moved, as the DRAM counts them
+  uint64_t dram_read_bytes = 0;  // bursts moved, as the DRAM counts them
   uint64_t dram_write_bytes = 0;
   double coarse_rays_per_iteration = 0;
   double fine_rays_per_iteration = 0;

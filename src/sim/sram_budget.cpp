@@ -28,10 +28,14 @@ uint64_t float_bits(const FloatFormat& f) { return uint64_t(f.total_bits()); }
 
 const char* sram_class_name(SramClass c) {
   switch (c) {
-    case SramClass::MicroGrid: return "micro_grid";
-    case SramClass::Feature: return "feature";
-    case SramClass::Mlp: return "mlp";
-    case SramClass::Others: return "others";
+    case SramClass::MicroGrid:
+      return "micro_grid";
+    case SramClass::Feature:
+      return "feature";
+    case SramClass::Mlp:
+      return "mlp";
+    case SramClass::Others:
+      return "others";
   }
   return "?";
 }

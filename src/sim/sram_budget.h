@@ -8,10 +8,9 @@
 // resolution (bitmaps, index widths), the feature channels (block bytes) and
 // the MLP's stored bytes (the TME's weight registers).
 #include <cstdint>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "sim/sim_config.h"
 

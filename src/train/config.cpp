@@ -81,8 +81,9 @@ void TrainConfig::validate() const {
   if (freeze_step(iters) >= iters) {
     const double after = double(per_cv_fraction) + double(qat_fraction);
     if (!(after > 0.0))
-      fail("train config: per_cv_fraction and qat_fraction are both 0: no step would follow the occupancy freeze, "
-           "so no model could be exported");
+      fail(
+          "train config: per_cv_fraction and qat_fraction are both 0: no step would follow the occupancy freeze, "
+          "so no model could be exported");
     // From n >= 1/after + 1 on, at least one step follows the freeze.
     const double bound = std::min(1e15, std::ceil(1.0 / after) + 1.0);
     int64_t least = int64_t(bound);
@@ -91,10 +92,11 @@ void TrainConfig::validate() const {
         least = n;
         break;
       }
-    fail("train config: iters {} (--iters or the preset) is too few: training would end before the occupancy "
-         "freezes at step {} (after {:.0f} % of the steps; per_cv_fraction and qat_fraction are the rest), so no "
-         "model could be exported; give at least {} steps",
-         iters, freeze_step(iters), 100.0 * (1.0 - per_cv_fraction - qat_fraction), least);
+    fail(
+        "train config: iters {} (--iters or the preset) is too few: training would end before the occupancy "
+        "freezes at step {} (after {:.0f} % of the steps; per_cv_fraction and qat_fraction are the rest), so no "
+        "model could be exported; give at least {} steps",
+        iters, freeze_step(iters), 100.0 * (1.0 - per_cv_fraction - qat_fraction), least);
   }
   if (minutes < 0) fail("train config: minutes must not be negative");
   if (plan_step < 10) fail("train config: plan_step must be at least 10");
@@ -126,9 +128,10 @@ void TrainConfig::validate() const {
   if (!(max_state_gib > 0.0 && max_state_gib <= 1024.0))
     fail("train config: max_state_gib {} must be in (0, 1024]", max_state_gib);
   if (main_state_bytes() > max_state_bytes())
-    fail("train config: micro_res {} with levels [{}] needs {:.2f} GiB for the occupancy grid and the feature "
-         "pyramid, over the limit max_state_gib = {} GiB",
-         micro_res, fmt::join(levels, ", "), double(main_state_bytes()) / double(uint64_t{1} << 30), max_state_gib);
+    fail(
+        "train config: micro_res {} with levels [{}] needs {:.2f} GiB for the occupancy grid and the feature "
+        "pyramid, over the limit max_state_gib = {} GiB",
+        micro_res, fmt::join(levels, ", "), double(main_state_bytes()) / double(uint64_t{1} << 30), max_state_gib);
 }
 
 namespace {

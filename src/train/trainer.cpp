@@ -837,10 +837,11 @@ struct Trainer::State {
     // yet (too few steps) would need a block for nearly every fine voxel.
     const uint64_t state_bytes = cfg.block_state_bytes(fine_index.size());
     if (state_bytes > cfg.max_state_bytes())
-      fail("at the freeze (step {}) the occupancy grid still holds {} of its {} fine voxels: their feature blocks need "
-           "{:.2f} GiB of training state, over the limit max_state_gib = {} GiB; train for more steps (--iters) so "
-           "that empty space is found, or raise max_state_gib in the config",
-           step, fine_index.size(), fine.size(), double(state_bytes) / double(uint64_t{1} << 30), cfg.max_state_gib);
+      fail(
+          "at the freeze (step {}) the occupancy grid still holds {} of its {} fine voxels: their feature blocks need "
+          "{:.2f} GiB of training state, over the limit max_state_gib = {} GiB; train for more steps (--iters) so "
+          "that empty space is found, or raise max_state_gib in the config",
+          step, fine_index.size(), fine.size(), double(state_bytes) / double(uint64_t{1} << 30), cfg.max_state_gib);
     std::vector<float> values(fine_index.size() * kBlockVerts * size_t(F));
     const int n_blocks = int(fine_index.size());
 #pragma omp parallel for schedule(dynamic, 16)
@@ -1065,8 +1066,7 @@ struct Trainer::State {
   // --- export ---------------------------------------------------------------
 
   SceneModel make_model(bool quantized) const {
-    if (phase == Phase::Main || cv_to_mlp.empty())
-      fail("the model cannot be exported before the occupancy is frozen");
+    if (phase == Phase::Main || cv_to_mlp.empty()) fail("the model cannot be exported before the occupancy is frozen");
     SceneModel m;
     m.scene_box = cfg.scene_box;
     m.micro_res = cfg.micro_res;
@@ -1280,8 +1280,7 @@ struct Trainer::State {
     if (q.empty() && phase == Phase::Quantize) expect_size("feature_quant", q.size(), 2 * size_t(F));
     for (size_t i = 0; i + 1 < q.size(); i += 2)
       if (!(q[i] > 0.f) || !std::isfinite(q[i]) || !std::isfinite(1.f / q[i]) ||
-          !(q[i + 1] >= 0.f && q[i + 1] <= 15.f) ||
-          q[i + 1] != std::floor(q[i + 1]))
+          !(q[i + 1] >= 0.f && q[i + 1] <= 15.f) || q[i + 1] != std::floor(q[i + 1]))
         bad("INT4 channel", fmt::format("scale {}, zero point {}", q[i], q[i + 1]));
     feature_quant.clear();
     for (size_t i = 0; i + 1 < q.size(); i += 2) {

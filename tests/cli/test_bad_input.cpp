@@ -31,10 +31,10 @@ namespace {
 namespace fs = std::filesystem;
 
 struct BadInput {
-  const char* name;       // what the case is about (the test's name)
-  const char* args;       // the command line; {D} is the fixture folder, {SRC} the source tree
-  int exit_code;          // 1: an edrnr error; CLI11 parse errors: 104 conversion, 106 required, 109 extras
-  const char* fragment;   // must appear on stderr
+  const char* name;      // what the case is about (the test's name)
+  const char* args;      // the command line; {D} is the fixture folder, {SRC} the source tree
+  int exit_code;         // 1: an edrnr error; CLI11 parse errors: 104 conversion, 106 required, 109 extras
+  const char* fragment;  // must appear on stderr
 };
 
 // clang-format off
@@ -200,7 +200,8 @@ const BadInput kCases[] = {
 // clang-format on
 
 std::string replace_all(std::string s, const std::string& from, const std::string& to) {
-  for (size_t at = s.find(from); at != std::string::npos; at = s.find(from, at + to.size())) s.replace(at, from.size(), to);
+  for (size_t at = s.find(from); at != std::string::npos; at = s.find(from, at + to.size()))
+    s.replace(at, from.size(), to);
   return s;
 }
 
@@ -228,8 +229,8 @@ class BadInputBattery : public ::testing::TestWithParam<BadInput> {
   static nlohmann::json frames_json(int n, const std::string& file = "./test/r_0") {
     nlohmann::json frames = nlohmann::json::array();
     for (int i = 0; i < n; ++i)
-      frames.push_back({{"file_path", file},
-                        {"transform_matrix", {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 4}, {0, 0, 0, 1}}}});
+      frames.push_back(
+          {{"file_path", file}, {"transform_matrix", {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 4}, {0, 0, 0, 1}}}});
     return frames;
   }
 
@@ -284,8 +285,10 @@ class BadInputBattery : public ::testing::TestWithParam<BadInput> {
     write_split("bigsplit", "test", {{"fl_x", 100}, {"w", 4096}, {"h", 4096}, {"frames", frames_json(20)}});
     // A PNG whose header claims 30000 x 30000 (its data is one pixel).
     const std::string png = read_file_text(dir_ / "data" / "test" / "r_0.png");
-    std::string ihdr = std::string("\0\0\0\x0dIHDR", 8) + std::string("\0\0\x75\x30\0\0\x75\x30", 8) + png.substr(24, 5);
-    const uint32_t ihdr_crc = uint32_t(crc32(crc32(0L, Z_NULL, 0), reinterpret_cast<const Bytef*>(ihdr.data() + 4), 17));
+    std::string ihdr =
+        std::string("\0\0\0\x0dIHDR", 8) + std::string("\0\0\x75\x30\0\0\x75\x30", 8) + png.substr(24, 5);
+    const uint32_t ihdr_crc =
+        uint32_t(crc32(crc32(0L, Z_NULL, 0), reinterpret_cast<const Bytef*>(ihdr.data() + 4), 17));
     for (int i = 3; i >= 0; --i) ihdr += char(ihdr_crc >> (8 * i));
     write_split("hugepng", "test", {{"camera_angle_x", 0.7}, {"frames", frames_json(1)}});
     fs::create_directories(dir_ / "hugepng" / "test");

@@ -8,8 +8,8 @@
 
 #include <algorithm>
 #include <csignal>
-#include <functional>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -94,7 +94,6 @@ TEST_F(FileIo, ErrorsNameThePath) {
   // A folder is not a readable file.
   EXPECT_THROW(read_file_bytes(dir_), Error);
 }
-
 
 // ---- outputs that are not plain new files (issue #16) ----
 

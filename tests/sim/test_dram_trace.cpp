@@ -1,9 +1,8 @@
 // Trace parsing, synthetic traffic and the workload driver.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>
-
-#include <fmt/format.h>
 
 #include "core/error.h"
 #include "core/stats.h"
@@ -157,10 +156,10 @@ TEST(DramTrace, IdleGapsAreJumpedWithTheSameResultAsTicking) {
   // right at a refresh, some rows left open across a gap.
   std::string text;
   const uint64_t refi = c.tREFI;
-  for (uint64_t t : {uint64_t{0}, uint64_t{3}, uint64_t{40}, refi - 1, refi, 5 * refi + 17, 5 * refi + 18,
-                     9 * refi + 2, 40 * refi + 123}) {
-    for (int k = 0; k < 6; ++k) text += fmt::format("0x{:x} {} {}\n", (t * 4096 + uint64_t(k) * 8192) % (1u << 30),
-                                                     k % 3 ? "READ" : "WRITE", t);
+  for (uint64_t t : {uint64_t{0}, uint64_t{3}, uint64_t{40}, refi - 1, refi, 5 * refi + 17, 5 * refi + 18, 9 * refi + 2,
+                     40 * refi + 123}) {
+    for (int k = 0; k < 6; ++k)
+      text += fmt::format("0x{:x} {} {}\n", (t * 4096 + uint64_t(k) * 8192) % (1u << 30), k % 3 ? "READ" : "WRITE", t);
   }
   for (bool refresh : {true, false}) {
     c.refresh = refresh;

@@ -229,9 +229,9 @@ TEST(SramBudget, EveryBufferIsCountedAndOneByteOverIsRefused) {
   EXPECT_EQ(bytes("micro_grid_cache"), uint64_t(cfg.chip.micro_grid_cache_bytes));
   EXPECT_EQ(bytes("mlp_cache"), uint64_t(cfg.chip.mlp_cache_bytes));
   EXPECT_EQ(bytes("feature_cache"), uint64_t(feature_cache_lines(cfg.chip, 16)) * 1000);
-  EXPECT_EQ(bytes("coarse_bitmap"), 64u);      // 8^3 bits
-  EXPECT_EQ(bytes("fine_bitmap"), 32768u);     // 64^3 bits
-  EXPECT_EQ(bytes("tme_weights"), 1216u);      // the MLP in the MAC array
+  EXPECT_EQ(bytes("coarse_bitmap"), 64u);   // 8^3 bits
+  EXPECT_EQ(bytes("fine_bitmap"), 32768u);  // 64^3 bits
+  EXPECT_EQ(bytes("tme_weights"), 1216u);   // the MLP in the MAC array
   uint64_t others = 0, total = 0;
   for (const SramBuffer& x : b.buffers) {
     total += x.bytes;

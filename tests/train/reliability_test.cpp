@@ -15,6 +15,7 @@
 #include "data/dataset.h"
 #include "model/model_io.h"
 #include "model/procedural.h"
+#include "temp_dir.h"
 #include "train/checkpoint_io.h"
 #include "train/config.h"
 #include "train/feature_grid.h"
@@ -26,18 +27,6 @@ namespace edrnr::train {
 namespace {
 
 namespace fs = std::filesystem;
-
-struct TempDir {
-  fs::path path;
-  explicit TempDir(const std::string& name) : path(fs::temp_directory_path() / fmt::format("{}_{}", name, ::getpid())) {
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
 
 // 8 training views at 32 x 32 of a sphere.
 const Dataset& data() {

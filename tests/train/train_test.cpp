@@ -14,6 +14,7 @@
 #include "model/model_io.h"
 #include "model/procedural.h"
 #include "render/reference.h"
+#include "temp_dir.h"
 #include "train/config.h"
 #include "train/images.h"
 #include "train/synthetic.h"
@@ -23,19 +24,6 @@ namespace edrnr::train {
 namespace {
 
 namespace fs = std::filesystem;
-
-// A temporary folder removed when the test process ends.
-struct TempDir {
-  fs::path path;
-  explicit TempDir(const std::string& name) : path(fs::temp_directory_path() / fmt::format("{}_{}", name, ::getpid())) {
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
 
 // 32 training and 8 test views at 64 x 64 of the "several" scene, made once.
 const fs::path& dataset_dir() {
