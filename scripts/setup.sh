@@ -6,7 +6,7 @@ set -euo pipefail
 PACKAGES=(
   build-essential cmake ninja-build pkg-config git
   libcli11-dev nlohmann-json3-dev libyaml-cpp-dev libfmt-dev
-  libspng-dev zlib1g-dev libeigen3-dev
+  libspng-dev zlib1g-dev libeigen3-dev libhwy-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-matplotlib   # scripts/report_figures.py (edrnr reproduce)
 )
