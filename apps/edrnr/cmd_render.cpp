@@ -5,8 +5,11 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
 #include <memory>
 #include <string>
+#include <system_error>
 
 #include "commands.h"
 #include "core/error.h"
@@ -32,8 +35,9 @@ struct RenderOptions {
   float step = 1.f;
   std::string form = "auto", background = "white", engine = "reference";
   int threads = 0;
-  CLI::Option *dataset_opt, *camera_opt, *orbit_opt, *split_opt, *view_opt, *elev_opt, *radius_opt, *fov_opt,
-      *width_opt, *height_opt;
+  int turntable = 0;
+  CLI::Option *turntable_opt = nullptr, *dataset_opt, *camera_opt, *orbit_opt, *split_opt, *view_opt, *elev_opt,
+              *radius_opt, *fov_opt, *width_opt, *height_opt;
 };
 
 // The image size: the flags if given (one alone keeps the aspect ratio), else
@@ -82,6 +86,70 @@ Camera pick_camera(const RenderOptions& o) {
   return (w == cam.width && h == cam.height) ? cam : resize_camera(cam, w, h);
 }
 
+// The path of the first executable called `name` in a PATH folder, or "" if none.
+std::string find_on_path(const std::string& name) {
+  const char* path = std::getenv("PATH");
+  if (!path) return "";
+  std::string dirs = path;
+  size_t start = 0;
+  for (;;) {
+    const size_t colon = dirs.find(':', start);
+    const std::string dir = dirs.substr(start, colon == std::string::npos ? std::string::npos : colon - start);
+    std::error_code ec;
+    const std::filesystem::path exe = std::filesystem::path(dir.empty() ? "." : dir) / name;
+    if (std::filesystem::is_regular_file(exe, ec) &&
+        (std::filesystem::status(exe, ec).permissions() & std::filesystem::perms::owner_exec) !=
+            std::filesystem::perms::none)
+      return exe.string();
+    if (colon == std::string::npos) return "";
+    start = colon + 1;
+  }
+}
+
+// --turntable N: N orbit frames around the object (azimuth 360 i / N, the
+// orbit flags for elevation, radius, field of view and size) written to the
+// folder -o as frame_0000.png, ...; then an MP4 with ffmpeg when it is on PATH.
+void run_turntable(const RenderOptions& o, const Engine& engine, const RenderSettings& s) {
+  if (o.turntable < 1 || o.turntable > 3600) fail("--turntable {} is outside 1..3600 frames", o.turntable);
+  if (o.dataset_opt->count() || o.camera_opt->count() || o.orbit_opt->count())
+    fail("--turntable makes its own orbit cameras: give no --dataset, --camera or --orbit");
+  const std::filesystem::path dir = o.output;
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (!std::filesystem::is_directory(dir, ec))
+    fail("-o '{}': cannot create this folder for the turntable frames", o.output);
+  int w, h;
+  pick_size(o, 800, 800, w, h);
+  const SceneModel model = load_model(o.model);
+  check_step_micro(o.step, model.micro_res, "--step");
+  const auto t0 = std::chrono::steady_clock::now();
+  uint64_t samples = 0;
+  for (int i = 0; i < o.turntable; ++i) {
+    const Camera cam = orbit_camera(w, h, 360.0 * i / o.turntable, o.elevation, o.radius, o.fov);
+    RenderStats stats;
+    const Image img = engine.render(model, cam, s, &stats);
+    samples += stats.samples;
+    write_png(dir / fmt::format("frame_{:04d}.png", i), img);
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  fmt::print("{}: {} frames {}x{} with the {} engine, {:.2f} s ({:.2f} FPS, {:.0f} samples/s)\n", o.output, o.turntable,
+             w, h, engine.name, seconds, o.turntable / seconds, double(samples) / seconds);
+  const std::string ffmpeg = find_on_path("ffmpeg");
+  if (ffmpeg.empty()) {
+    fmt::print("ffmpeg is not installed: no video made; the frames are in {}\n", o.output);
+    return;
+  }
+  const std::filesystem::path video = dir / "turntable.mp4";
+  const std::string cmd =
+      fmt::format("'{}' -loglevel error -y -framerate 30 -i '{}' -c:v libx264 -pix_fmt yuv420p '{}'", ffmpeg,
+                  (dir / "frame_%04d.png").string(), video.string());
+  if (o.output.find('\'') != std::string::npos)
+    fail("-o '{}': a quote in the folder name cannot be passed to ffmpeg", o.output);
+  if (std::system(cmd.c_str()) != 0)
+    fail("ffmpeg failed to make {} from the frames (they are kept in {})", video.string(), o.output);
+  fmt::print("{}: MP4 made with ffmpeg\n", video.string());
+}
+
 void run_render(const RenderOptions& o) {
   const Engine& engine = find_engine(o.engine);
   RenderSettings s;
@@ -91,6 +159,7 @@ void run_render(const RenderOptions& o) {
   limits::check_threads(o.threads);
   s.threads = o.threads;
   check_step_micro(o.step, 0, "--step");
+  if (o.turntable_opt->count()) return run_turntable(o, engine, s);
   check_output_path(o.output, "-o");
   const Camera cam = pick_camera(o);
   const SceneModel model = load_model(o.model);
@@ -116,7 +185,11 @@ void register_render_cmd(CLI::App& app) {
   auto o = std::make_shared<RenderOptions>();
   CLI::App* cmd = app.add_subcommand("render", "Render one image of a model");
   cmd->add_option("model", o->model, "the .edrnr model")->required();
-  cmd->add_option("-o,--output", o->output, "the PNG to write")->required();
+  cmd->add_option("-o,--output", o->output, "the PNG to write (with --turntable: the folder for the frames)")
+      ->required();
+  o->turntable_opt = cmd->add_option("--turntable", o->turntable,
+                                     "N frames around the object into the folder -o (orbit flags apply), and an MP4 "
+                                     "if ffmpeg is installed");
   o->dataset_opt = cmd->add_option("--dataset", o->dataset, "camera from a NeRF dataset folder (transforms_*.json)");
   o->split_opt = cmd->add_option("--split", o->split, "dataset split")->capture_default_str();
   o->view_opt = cmd->add_option("--view", o->view, "dataset view index")->capture_default_str();
@@ -131,7 +204,10 @@ void register_render_cmd(CLI::App& app) {
   cmd->add_option("--form", o->form, "auto, float or quantized")->capture_default_str();
   cmd->add_option("--background", o->background, "white, black or R,G,B")->capture_default_str();
   cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();
-  cmd->add_option("--engine", o->engine, "renderer: reference (float golden) or chip (bit-accurate chip model)")
+  cmd->add_option(
+         "--engine", o->engine,
+         "renderer: reference (float golden), fast (fast CPU renderer, INT8 path on quantized models), fast-float or "
+         "chip (bit-accurate chip model)")
       ->capture_default_str();
   cmd->callback([o] { run_render(*o); });
 }

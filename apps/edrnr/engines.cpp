@@ -4,6 +4,7 @@
 
 #include "chip/chip.h"
 #include "core/error.h"
+#include "render/fast.h"
 #include "render/reference.h"
 
 namespace edrnr::cli {
@@ -12,6 +13,8 @@ namespace {
 const Engine kEngines[] = {
     {"reference", "float volume rendering, the golden model", render_reference},
     {"chip", "bit-accurate EDR-NR chip model (configs/chip/default.yaml settings)", render_chip_engine},
+    {"fast", "fast CPU renderer: INT8 path (the chip's arithmetic) on quantized models, float otherwise", render_fast},
+    {"fast-float", "fast CPU renderer, float arithmetic (the reference's)", render_fast_float},
 };
 
 }  // namespace

@@ -1,0 +1,335 @@
+#include "render/fast.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <vector>
+
+#include "core/error.h"
+#include "model/mlp.h"
+#include "render/fast_kernels.h"
+#include "render/fast_march.h"
+#include "render/traversal.h"
+
+namespace edrnr {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+constexpr int kTile = 16;                                 // tile edge, pixels
+constexpr int kTileRays = kTile * kTile;                  // rays per packet (a multiple of every SIMD width)
+constexpr int kFirstRoundSamples = 4;                     // samples a ray hands over in the first round
+constexpr int kMaxRoundSamples = 32;                      // ... doubling each round up to this
+constexpr int kCvMicro = kMicroPerFine * kFinePerCoarse;  // micro voxels per coarse voxel edge
+
+void check_inputs(const Camera& camera, const RenderSettings& s) {
+  if (camera.width <= 0 || camera.height <= 0) fail("camera image size {}x{} is empty", camera.width, camera.height);
+  if (!(std::isfinite(camera.fx) && std::isfinite(camera.fy) && camera.fx != 0 && camera.fy != 0))
+    fail("camera focal lengths {}, {} are not finite and non-zero", camera.fx, camera.fy);
+  const Ray corner = camera.pixel_ray(0, 0);
+  if (!(std::isfinite(corner.origin.x) && std::isfinite(corner.origin.y) && std::isfinite(corner.origin.z) &&
+        std::isfinite(corner.dir.x) && std::isfinite(corner.dir.y) && std::isfinite(corner.dir.z)))
+    fail("camera transform gives no valid rays (a degenerate or non-finite transform_matrix)");
+  if (!(s.step_micro > 0.f && std::isfinite(s.step_micro))) fail("render step {} must be positive", s.step_micro);
+  if (!(s.transmittance_min >= 0.f && s.transmittance_min <= 1.f))
+    fail("transmittance threshold {} is outside [0, 1]", s.transmittance_min);
+  if (s.threads < 0) fail("thread count {} is negative", s.threads);
+}
+
+// Interleaves the bits of x and y (x in the even bits).
+uint64_t morton(uint32_t x, uint32_t y) {
+  uint64_t r = 0;
+  for (int b = 0; b < 32; ++b) r |= (uint64_t((x >> b) & 1) << (2 * b)) | (uint64_t((y >> b) & 1) << (2 * b + 1));
+  return r;
+}
+
+struct Tile {
+  int x0, y0, x1, y1;
+};
+
+// Tiles of the image in Z order.
+std::vector<Tile> z_order_tiles(int W, int H) {
+  const int tx = (W + kTile - 1) / kTile, ty = (H + kTile - 1) / kTile;
+  std::vector<std::pair<uint64_t, Tile>> keyed;
+  for (int j = 0; j < ty; ++j)
+    for (int i = 0; i < tx; ++i)
+      keyed.push_back({morton(uint32_t(i), uint32_t(j)),
+                       Tile{i * kTile, j * kTile, std::min(W, (i + 1) * kTile), std::min(H, (j + 1) * kTile)}});
+  std::sort(keyed.begin(), keyed.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<Tile> tiles;
+  for (const auto& k : keyed) tiles.push_back(k.second);
+  return tiles;
+}
+
+// One thread's working set, reused from tile to tile.
+struct TileWork {
+  std::vector<FastMarcher> marchers;
+  alignas(64) float dx[kTileRays], dy[kTileRays], dz[kTileRays];
+  std::vector<float> dir;  // dir_dims rows of kTileRays
+  float T[kTileRays], rgb[kTileRays][3];
+  bool open[kTileRays];       // may still have samples and T above the threshold
+  bool exhausted[kTileRays];  // its march has ended
+  uint32_t begin[kTileRays], end[kTileRays];
+  std::vector<FastSample> samples;
+  std::vector<FastSampleOut> outs;
+  std::vector<uint32_t> order, count, first, used;
+};
+
+struct ThreadTotals {
+  RenderStats stats;
+  FastProfile profile;
+  uint64_t missing = 0;
+};
+
+double since(Clock::time_point& t) {
+  const Clock::time_point now = Clock::now();
+  const double s = std::chrono::duration<double>(now - t).count();
+  t = now;
+  return s;
+}
+
+class TileRenderer {
+ public:
+  TileRenderer(const FastModel& fm, const FastSkipGrid& skip, const Camera& camera, const RenderSettings& s,
+               Image& image, bool profile)
+      : fm_(fm), m_(*fm.model), skip_(skip), camera_(camera), s_(s), image_(image), profile_(profile) {
+    delta_ = sample_spacing(m_, s.step_micro);
+    aabb_ = {m_.object_aabb.lo.cast<double>(), m_.object_aabb.hi.cast<double>()};
+  }
+
+  void render(const Tile& tile, TileWork& w, ThreadTotals& tot) const {
+    Clock::time_point t = Clock::now();
+    const int tw = tile.x1 - tile.x0;
+    const int n = tw * (tile.y1 - tile.y0);
+    w.marchers.clear();
+    w.marchers.reserve(kTileRays);
+    for (int r = 0; r < kTileRays; ++r) {
+      if (r >= n) {  // padding lanes of the direction encoding
+        w.dx[r] = w.dy[r] = w.dz[r] = 0.f;
+        continue;
+      }
+      const Ray ray = camera_.pixel_ray(tile.x0 + r % tw, tile.y0 + r / tw);
+      ++tot.stats.rays;
+      double t_near, t_far;
+      if (intersect_box(ray.origin, ray.dir, aabb_, t_near, t_far) && t_far >= 0) ++tot.stats.rays_hit_aabb;
+      const Vec3f d = ray.dir.cast<float>();
+      w.dx[r] = d.x;
+      w.dy[r] = d.y;
+      w.dz[r] = d.z;
+      w.marchers.emplace_back(m_, skip_, ray, make_micro_ray(m_, ray, delta_));
+      w.T[r] = 1.f;
+      w.rgb[r][0] = w.rgb[r][1] = w.rgb[r][2] = 0.f;
+      w.open[r] = true;
+      w.exhausted[r] = false;
+    }
+    bool encoded = false;
+    double traversal = 0, compositing = 0;
+    FastKernelSeconds kernel;
+    for (int round = 0, per_ray = kFirstRoundSamples;; ++round, per_ray = std::min(2 * per_ray, kMaxRoundSamples)) {
+      // Traversal: each open ray's next samples, contiguous per ray.
+      w.samples.clear();
+      bool any = false;
+      for (int r = 0; r < n; ++r) {
+        w.begin[r] = w.end[r] = uint32_t(w.samples.size());
+        if (!w.open[r]) continue;
+        any = true;
+        gather(w, r, per_ray, tot);
+        w.end[r] = uint32_t(w.samples.size());
+      }
+      if (!any) break;
+      if (profile_) traversal += since(t);
+      if (!w.samples.empty()) {
+        if (!encoded && fm_.dir_dims > 0) {
+          w.dir.resize(size_t(fm_.dir_dims) * kTileRays);
+          fast_encode_directions(fm_, w.dx, w.dy, w.dz, kTileRays, w.dir.data(), kTileRays);
+          encoded = true;
+        }
+        group_by_mlp(w);
+        if (profile_) traversal += since(t);
+        // Interpolation and MLPs, one coarse voxel's batch at a time.
+        w.outs.resize(w.samples.size());
+        for (uint32_t u : w.used) {
+          fast_eval_batch(fm_, u, w.samples.data(), w.order.data() + w.first[u], w.count[u], w.dir.data(), kTileRays,
+                          delta_, w.outs.data(), profile_ ? &kernel : nullptr);
+          w.count[u] = 0;
+        }
+        tot.profile.mlp_samples += w.samples.size();
+        if (profile_) t = Clock::now();
+      }
+      // Compositing, each ray in sample order.
+      for (int r = 0; r < n; ++r) {
+        if (!w.open[r]) continue;
+        if (w.exhausted[r]) w.open[r] = false;
+        float T = w.T[r];
+        for (uint32_t i = w.begin[r]; i < w.end[r] && T >= s_.transmittance_min; ++i) {
+          const FastSampleOut& o = w.outs[i];
+          const float weight = T * o.alpha;
+          for (int c = 0; c < 3; ++c) w.rgb[r][c] += weight * o.rgb[c];
+          T *= o.trans;
+          ++tot.stats.samples;
+        }
+        w.T[r] = T;
+        if (T < s_.transmittance_min) w.open[r] = false;
+      }
+      if (profile_) compositing += since(t);
+    }
+    for (int r = 0; r < n; ++r) {
+      tot.stats.occupancy_checks += w.marchers[size_t(r)].occupancy_checks();
+      float* px = image_.at(tile.x0 + r % tw, tile.y0 + r / tw);
+      for (int c = 0; c < 3; ++c) px[c] = w.rgb[r][c] + w.T[r] * s_.background[c];
+    }
+    if (profile_) {
+      compositing += since(t);
+      tot.profile.traversal_s += traversal;
+      tot.profile.compositing_s += compositing;
+      tot.profile.interpolation_s += kernel.interpolation;
+      tot.profile.mlp_s += kernel.mlp;
+    }
+  }
+
+ private:
+  // Up to `limit` samples of ray r; marks the ray exhausted when its march ends.
+  void gather(TileWork& w, int r, int limit, ThreadTotals& tot) const {
+    FastMarcher& march = w.marchers[size_t(r)];
+    const int cr = m_.coarse_res();
+    MarchSample s;
+    for (int k = 0; k < limit;) {
+      if (!march.next(s)) {
+        w.exhausted[r] = true;
+        return;
+      }
+      const Vec3i& v = s.voxel;
+      const int32_t mlp = m_.coarse_to_mlp[linear_index(v.x / kCvMicro, v.y / kCvMicro, v.z / kCvMicro, cr)];
+      const Vec3i fine{v.x / kMicroPerFine, v.y / kMicroPerFine, v.z / kMicroPerFine};
+      const int32_t block = march.block();
+      if (mlp < 0 || block < 0) {
+        ++tot.missing;
+        continue;
+      }
+      FastSample f;
+      f.ray = uint32_t(r);
+      f.mlp = uint32_t(mlp);
+      const int lx = v.x - kMicroPerFine * fine.x, ly = v.y - kMicroPerFine * fine.y, lz = v.z - kMicroPerFine * fine.z;
+      f.vertex =
+          uint32_t(size_t(block) * kBlockVerts + size_t(lx + kBlockVertsPerAxis * (ly + kBlockVertsPerAxis * lz)));
+      f.fx = s.p_micro.x - float(v.x);
+      f.fy = s.p_micro.y - float(v.y);
+      f.fz = s.p_micro.z - float(v.z);
+      w.samples.push_back(f);
+      ++k;
+    }
+  }
+
+  // Counting sort of the round's samples by MLP: w.order holds the samples of
+  // MLP u at [first[u], first[u] + count[u]); w.used lists the MLPs met.
+  void group_by_mlp(TileWork& w) const {
+    if (w.count.size() != m_.mlp_count()) {
+      w.count.assign(m_.mlp_count(), 0);
+      w.first.assign(m_.mlp_count(), 0);
+    }
+    w.used.clear();
+    for (const FastSample& f : w.samples)
+      if (w.count[f.mlp]++ == 0) w.used.push_back(f.mlp);
+    uint32_t at = 0;
+    for (uint32_t u : w.used) {
+      w.first[u] = at;
+      at += w.count[u];
+      w.count[u] = 0;
+    }
+    w.order.resize(w.samples.size());
+    for (uint32_t i = 0; i < w.samples.size(); ++i) {
+      const uint32_t u = w.samples[i].mlp;
+      w.order[w.first[u] + w.count[u]++] = i;
+    }
+  }
+
+  const FastModel& fm_;
+  const SceneModel& m_;
+  const FastSkipGrid& skip_;
+  const Camera& camera_;
+  const RenderSettings& s_;
+  Image& image_;
+  bool profile_;
+  float delta_ = 0;
+  Box3d aabb_;
+};
+
+}  // namespace
+
+FastRenderer::FastRenderer(const SceneModel& model, ModelForm form, FastPath path) {
+  const ResolvedForm resolved = resolve_model_form(model, form);
+  FastArithmetic a = FastArithmetic::Float;
+  if (path == FastPath::Int8) {
+    if (!(resolved.quantized_features && resolved.quantized_mlps))
+      fail("the fast renderer's INT8 path needs the quantized form (INT4 features and INT8 MLPs)");
+    a = FastArithmetic::Int8;
+  } else if (path == FastPath::Auto && resolved.quantized_features && resolved.quantized_mlps) {
+    a = FastArithmetic::Int8;
+  }
+  fm_ = pack_fast_model(model, resolved, a);
+  skip_ = std::make_shared<const FastSkipGrid>(model);
+}
+
+Image FastRenderer::render(const Camera& camera, const RenderSettings& settings, RenderStats* stats,
+                           FastProfile* profile) const {
+  check_inputs(camera, settings);
+  const int W = camera.width, H = camera.height;
+  Image image(W, H, 3);
+  const std::vector<Tile> tiles = z_order_tiles(W, H);
+  const int threads = settings.threads > 0 ? settings.threads : omp_get_max_threads();
+  const TileRenderer tr(fm_, *skip_, camera, settings, image, profile != nullptr);
+  ThreadTotals total;
+#pragma omp parallel num_threads(threads)
+  {
+    TileWork work;
+    ThreadTotals local;
+#pragma omp for schedule(dynamic, 1)
+    for (size_t i = 0; i < tiles.size(); ++i) tr.render(tiles[i], work, local);
+#pragma omp critical
+    {
+      total.stats.rays += local.stats.rays;
+      total.stats.rays_hit_aabb += local.stats.rays_hit_aabb;
+      total.stats.samples += local.stats.samples;
+      total.stats.occupancy_checks += local.stats.occupancy_checks;
+      total.profile.traversal_s += local.profile.traversal_s;
+      total.profile.interpolation_s += local.profile.interpolation_s;
+      total.profile.mlp_s += local.profile.mlp_s;
+      total.profile.compositing_s += local.profile.compositing_s;
+      total.profile.mlp_samples += local.profile.mlp_samples;
+      total.missing += local.missing;
+    }
+  }
+  if (total.missing)
+    fail("{} samples lie in occupied micro voxels without a feature block or MLP (the model breaks its invariants)",
+         total.missing);
+  if (stats) *stats = total.stats;
+  if (profile) *profile = total.profile;
+  return image;
+}
+
+void export_fast_stats(const RenderStats& stats, const FastProfile& profile, StatsRegistry& r, const std::string& p) {
+  r.counter(p + ".rays", "rays", "rays cast, one per pixel") += stats.rays;
+  r.counter(p + ".rays_hit_aabb", "rays", "rays that meet the object AABB") += stats.rays_hit_aabb;
+  r.counter(p + ".samples", "samples", "samples composited") += stats.samples;
+  r.counter(p + ".mlp_samples", "samples", "samples run through an MLP, including those past a ray's end") +=
+      profile.mlp_samples;
+  r.counter(p + ".occupancy_checks", "lookups", "distance-field and occupancy lookups") += stats.occupancy_checks;
+  r.value(p + ".traversal_s", "s", "thread time: ray set-up, marching, grouping by coarse voxel") +=
+      profile.traversal_s;
+  r.value(p + ".interpolation_s", "s", "thread time: trilinear feature reads") += profile.interpolation_s;
+  r.value(p + ".mlp_s", "s", "thread time: MLPs and activations") += profile.mlp_s;
+  r.value(p + ".compositing_s", "s", "thread time: alpha blending and pixel writes") += profile.compositing_s;
+}
+
+Image render_fast(const SceneModel& model, const Camera& camera, const RenderSettings& settings, RenderStats* stats) {
+  return FastRenderer(model, settings.form, FastPath::Auto).render(camera, settings, stats);
+}
+
+Image render_fast_float(const SceneModel& model, const Camera& camera, const RenderSettings& settings,
+                        RenderStats* stats) {
+  return FastRenderer(model, settings.form, FastPath::Float).render(camera, settings, stats);
+}
+
+}  // namespace edrnr

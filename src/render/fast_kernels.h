@@ -1,0 +1,54 @@
+#pragma once
+// SIMD kernels of the fast CPU renderer (Highway, runtime dispatch: the best
+// target the CPU has, AVX-512 included, is picked on the first call).
+//
+// A batch is a list of samples that all use one coarse voxel's MLP. The
+// kernels run it in chunks of one SIMD vector of samples (16 with AVX-512):
+// the features of a chunk are interpolated from the fine-voxel blocks straight
+// into a samples-in-lanes layout (one vector per channel), then every layer is
+// a small matrix product over the chunk (each weight broadcast once per
+// chunk), so the packed MLP (fast_model.h) stays in L1 for the whole batch.
+#include <cstddef>
+#include <cstdint>
+
+#include "render/fast_model.h"
+
+namespace edrnr {
+
+// One sample as the traversal gathers it.
+struct FastSample {
+  uint32_t ray = 0;              // index of its ray in the tile
+  uint32_t mlp = 0;              // packed MLP (coarse voxel)
+  uint32_t vertex = 0;           // block * 125 + block vertex of its micro voxel's corner (0, 0, 0)
+  float fx = 0, fy = 0, fz = 0;  // trilinear weights: position inside the micro voxel, 0..1
+};
+
+// What the compositor needs of a sample: its opacity, the transmittance
+// factor exp(-sigma delta) (Float) or 1 - alpha (Int8), and its colour.
+struct FastSampleOut {
+  float alpha = 0, trans = 1;
+  float rgb[3] = {0, 0, 0};
+};
+
+// Seconds spent per phase, summed over the calls that were given one.
+struct FastKernelSeconds {
+  double interpolation = 0, mlp = 0;
+};
+
+// Evaluates samples[order[i]], i < n, which all use MLP `mlp`, and writes
+// out[order[i]]. dir: the direction inputs of the tile's rays (fast_encode_
+// directions), value d of ray r at dir[d * ray_stride + r]. delta: sample
+// spacing in scene units. seconds (optional) collects the time per phase.
+void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastSample* samples, const uint32_t* order, size_t n,
+                     const float* dir, size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds);
+
+// The direction inputs of n rays with unit directions (dx[r], dy[r], dz[r]):
+// encode_direction's values (Float), or those values as INT8 codes of step
+// 1/127 (Int8). Writes value d of ray r to out[d * ray_stride + r].
+void fast_encode_directions(const FastModel& fm, const float* dx, const float* dy, const float* dz, size_t n,
+                            float* out, size_t ray_stride);
+
+// The SIMD target the kernels dispatch to on this CPU (e.g. "AVX3_DL").
+const char* fast_simd_target();
+
+}  // namespace edrnr

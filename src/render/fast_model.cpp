@@ -1,0 +1,198 @@
+#include "render/fast_model.h"
+
+#include <cmath>
+
+#include "core/error.h"
+#include "model/mlp.h"
+
+namespace edrnr {
+namespace {
+
+// The INT8 direction inputs have the fixed step 1/127 (+-1 is the largest code).
+constexpr double kDirectionStep = 1.0 / 127.0;
+
+void check_arch(const MlpArch& arch, int feature_channels) {
+  const auto& dw = arch.density_widths;
+  const auto& cw = arch.color_widths;
+  if (dw.size() < 2 || cw.size() < 2) fail("mlp_arch needs at least one layer in each net");
+  if (dw.front() != feature_channels)
+    fail("mlp_arch density input {} does not match the {} feature channels", dw.front(), feature_channels);
+  if (dw.back() < 1 || cw.front() != dw.back() + arch.dir_dims())
+    fail("mlp_arch colour input {} is not the density output {} plus {} direction values", cw.front(), dw.back(),
+         arch.dir_dims());
+  if (cw.back() != 3) fail("mlp_arch colour net has {} outputs, expected 3", cw.back());
+  if (arch.dir_frequencies < 0) fail("mlp_arch direction frequencies {} is negative", arch.dir_frequencies);
+  for (const auto* w : {&dw, &cw})
+    for (int n : *w)
+      if (n < 1 || n > kFastMaxWidth)
+        fail("mlp_arch layer width {} is outside 1..{} (the fast renderer's limit)", n, kFastMaxWidth);
+}
+
+void check_features(const SceneModel& m, const ResolvedForm& form) {
+  const size_t F = size_t(m.feature_channels);
+  const size_t values = m.block_count() * kBlockVerts * F;
+  if (m.block_count() == 0) return;
+  if (form.quantized_features) {
+    if (m.features_q4.size() != (values + 1) / 2 || m.feature_quant.scale.size() != F ||
+        m.feature_quant.zero_point.size() != F)
+      fail("model INT4 features hold {} bytes, expected {} for {} blocks", m.features_q4.size(), (values + 1) / 2,
+           m.block_count());
+  } else if (m.features_f32.size() != values) {
+    fail("model float features hold {} values, expected {} for {} blocks", m.features_f32.size(), values,
+         m.block_count());
+  }
+}
+
+// Shapes of the layers of one net, laid out from `offset` (advanced).
+std::vector<FastLayer> layout_net(const std::vector<int>& widths, size_t& offset, bool int8) {
+  std::vector<FastLayer> net;
+  for (size_t l = 0; l + 1 < widths.size(); ++l) {
+    FastLayer L;
+    L.in = widths[l];
+    L.out = widths[l + 1];
+    L.w = offset;
+    offset += size_t(L.in) * size_t(L.out);
+    L.b = offset;
+    offset += size_t(L.out);
+    if (int8) {
+      L.m = offset;
+      offset += size_t(L.out);
+    }
+    net.push_back(L);
+  }
+  return net;
+}
+
+void check_dense(const DenseF& d, const FastLayer& L, size_t mlp, const char* net, size_t l) {
+  if (d.in != L.in || d.out != L.out || d.w.size() != size_t(d.in) * size_t(d.out) || d.b.size() != size_t(d.out))
+    fail("MLP {} {} layer {} is {}x{} with {} weights, mlp_arch says {}x{}", mlp, net, l, d.out, d.in, d.w.size(),
+         L.out, L.in);
+}
+
+void check_dense(const DenseQ& d, const FastLayer& L, size_t mlp, const char* net, size_t l) {
+  if (d.in != L.in || d.out != L.out || d.w.size() != size_t(d.in) * size_t(d.out) || d.b.size() != size_t(d.out) ||
+      d.w_scale.size() != size_t(d.out))
+    fail("INT8 MLP {} {} layer {} is {}x{} with {} weights, mlp_arch says {}x{}", mlp, net, l, d.out, d.in, d.w.size(),
+         L.out, L.in);
+  if (!(d.in_scale > 0.f) || !std::isfinite(d.in_scale))
+    fail("INT8 MLP {} {} layer {}: input scale {} is not positive and finite", mlp, net, l, d.in_scale);
+  for (int o = 0; o < d.out; ++o)
+    if (!(d.w_scale[size_t(o)] >= 0.f) || !std::isfinite(d.w_scale[size_t(o)]))
+      fail("INT8 MLP {} {} layer {} neuron {}: weight scale {} is not finite and >= 0", mlp, net, l, o,
+           d.w_scale[size_t(o)]);
+}
+
+void pack_float_net(const std::vector<DenseF>& net, const std::vector<FastLayer>& layout, float* p, size_t mlp,
+                    const char* name) {
+  if (net.size() != layout.size())
+    fail("MLP {} has {} {} layers, mlp_arch says {}", mlp, net.size(), name, layout.size());
+  for (size_t l = 0; l < net.size(); ++l) {
+    check_dense(net[l], layout[l], mlp, name, l);
+    std::copy(net[l].w.begin(), net[l].w.end(), p + layout[l].w);
+    std::copy(net[l].b.begin(), net[l].b.end(), p + layout[l].b);
+  }
+}
+
+// The chip's INT8 form: integer weights, biases in accumulator units (weight
+// scale times input step) and one multiplier per neuron to the next layer's
+// input step, or to raw outputs in 1/256 steps.
+void pack_int8_net(const std::vector<DenseQ>& net, const std::vector<FastLayer>& layout, float* p, size_t mlp,
+                   const char* name) {
+  if (net.size() != layout.size())
+    fail("INT8 MLP {} has {} {} layers, mlp_arch says {}", mlp, net.size(), name, layout.size());
+  for (size_t l = 0; l < net.size(); ++l) {
+    const DenseQ& d = net[l];
+    const FastLayer& L = layout[l];
+    check_dense(d, L, mlp, name, l);
+    const bool hidden = l + 1 < net.size();
+    for (int o = 0; o < d.out; ++o) {
+      const double ws = d.w_scale[size_t(o)];
+      double acc_unit = ws * double(d.in_scale);
+      for (int i = 0; i < d.in; ++i) {
+        const size_t k = size_t(o) * size_t(d.in) + size_t(i);
+        p[L.w + k] = ws == 0.0 ? 0.f : float(d.w[k]);
+      }
+      if (ws == 0.0) acc_unit = double(d.in_scale);
+      p[L.b + size_t(o)] = float(std::nearbyint(double(d.b[size_t(o)]) / acc_unit));
+      p[L.m + size_t(o)] = float(hidden ? acc_unit / double(net[l + 1].in_scale) : acc_unit * 256.0);
+    }
+  }
+}
+
+}  // namespace
+
+FastModel pack_fast_model(const SceneModel& model, const ResolvedForm& form, FastArithmetic arithmetic) {
+  model.check_structure();
+  if (model.feature_channels < 1 || model.feature_channels > kFastMaxWidth)
+    fail("model has {} feature channels, the fast renderer takes 1..{}", model.feature_channels, kFastMaxWidth);
+  const bool int8 = arithmetic == FastArithmetic::Int8;
+  if (int8 && !(form.quantized_features && form.quantized_mlps))
+    fail("the INT8 path needs the model's INT4 features and INT8 MLPs");
+  check_features(model, form);
+
+  FastModel fm;
+  fm.model = &model;
+  fm.arithmetic = arithmetic;
+  fm.form = form;
+  fm.feature_channels = model.feature_channels;
+  const size_t F = size_t(model.feature_channels);
+  if (form.quantized_features) {
+    fm.feature_scale = model.feature_quant.scale;
+    for (size_t c = 0; c < F; ++c) {
+      if (!std::isfinite(fm.feature_scale[c]) || fm.feature_scale[c] < 0.f)
+        fail("model feature channel {} has scale {}, not finite and >= 0", c, fm.feature_scale[c]);
+      fm.feature_zero_point.push_back(float(model.feature_quant.zero_point[c]));
+    }
+  }
+  if (model.mlp_count() == 0) return fm;
+
+  const MlpArch& arch = model.mlp_arch;
+  check_arch(arch, model.feature_channels);
+  fm.geo_width = arch.geo_width();
+  fm.dir_dims = arch.dir_dims();
+  fm.dir_frequencies = arch.dir_frequencies;
+  if (fm.geo_width + fm.dir_dims > kFastMaxWidth)
+    fail("mlp_arch colour input {} is wider than {}", fm.geo_width + fm.dir_dims, kFastMaxWidth);
+  size_t offset = 0;
+  fm.density = layout_net(arch.density_widths, offset, int8);
+  fm.color = layout_net(arch.color_widths, offset, int8);
+  if (int8) {
+    fm.feature_in = offset;
+    offset += F;
+    fm.geo_in = offset++;
+    fm.dir_in = offset++;
+  }
+  fm.mlp_stride = (offset + 15) / 16 * 16;  // each MLP starts on a 64-byte boundary of the array
+  fm.params.assign(fm.mlp_stride * model.mlp_count(), 0.f);
+
+  const size_t n = int8 ? model.mlps_q8.size() : (form.quantized_mlps ? model.mlps_q8.size() : model.mlps_f32.size());
+  if (n != model.mlp_count()) fail("model has {} MLPs of the rendered form for {} coarse voxels", n, model.mlp_count());
+  for (size_t i = 0; i < n; ++i) {
+    float* p = fm.params.data() + i * fm.mlp_stride;
+    if (int8) {
+      const MlpQ& q = model.mlps_q8[i];
+      pack_int8_net(q.density, fm.density, p, i, "density");
+      pack_int8_net(q.color, fm.color, p, i, "colour");
+      const double d_in = q.density.front().in_scale, c_in = q.color.front().in_scale;
+      for (size_t c = 0; c < F; ++c) p[fm.feature_in + c] = float(double(fm.feature_scale[c]) / d_in);
+      p[fm.geo_in] = float(1.0 / (256.0 * c_in));
+      p[fm.dir_in] = float(kDirectionStep / c_in);
+    } else if (form.quantized_mlps) {
+      const MlpQ& q = model.mlps_q8[i];
+      for (const auto* net : {&q.density, &q.color})
+        for (const DenseQ& d : *net)
+          if (d.w_scale.size() != size_t(d.out) || d.w.size() != size_t(d.in) * size_t(d.out))
+            fail("INT8 MLP {} has a {}x{} layer with {} weights and {} scales", i, d.out, d.in, d.w.size(),
+                 d.w_scale.size());
+      const MlpF f = dequantize_mlp(q);
+      pack_float_net(f.density, fm.density, p, i, "density");
+      pack_float_net(f.color, fm.color, p, i, "colour");
+    } else {
+      pack_float_net(model.mlps_f32[i].density, fm.density, p, i, "density");
+      pack_float_net(model.mlps_f32[i].color, fm.color, p, i, "colour");
+    }
+  }
+  return fm;
+}
+
+}  // namespace edrnr

@@ -1,0 +1,198 @@
+// The fast CPU renderer against the reference renderer on procedural scenes.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+
+#include "core/error.h"
+#include "core/metrics.h"
+#include "model/procedural.h"
+#include "render/cameras.h"
+#include "render/fast.h"
+#include "render/fast_march.h"
+#include "render/options.h"
+#include "render/reference.h"
+#include "render/traversal.h"
+
+namespace edrnr {
+namespace {
+
+SceneModel several_model(int res, bool store_float = true) {
+  ProceduralOptions o;
+  o.micro_res = res;
+  o.store_float = store_float;
+  o.seed = 7;  // pseudo-random unused channels: every feature channel is read
+  return make_procedural_model("several", procedural_shapes("several"), o);
+}
+
+// Views around the scene at several azimuths and elevations, odd sizes so
+// that tiles are cut at the image edges.
+std::vector<Camera> views(int w, int h) {
+  return {orbit_camera(w, h, 0, 30, 4, 50), orbit_camera(w, h, 75, 10, 4.5, 45), orbit_camera(w, h, 200, 60, 4, 50),
+          orbit_camera(w, h, 310, -20, 3.5, 60)};
+}
+
+TEST(Fast, FloatPathMatchesTheReference) {
+  const SceneModel m = several_model(128);
+  for (ModelForm form : {ModelForm::Float, ModelForm::Quantized}) {
+    const FastRenderer fast(m, form, FastPath::Float);
+    ASSERT_EQ(fast.arithmetic(), FastArithmetic::Float);
+    RenderSettings s;
+    s.form = form;
+    for (const Camera& cam : views(61, 47)) {
+      RenderStats rs, fs;
+      const Image ref = render_reference(m, cam, s, &rs);
+      const Image img = fast.render(cam, s, &fs);
+      ASSERT_EQ(img.width, ref.width);
+      ASSERT_EQ(img.height, ref.height);
+      EXPECT_GE(psnr(img, ref), 50.0) << model_form_name(form);
+      EXPECT_EQ(fs.rays, rs.rays);
+      EXPECT_EQ(fs.rays_hit_aabb, rs.rays_hit_aabb);
+      EXPECT_EQ(fs.samples, rs.samples);
+      EXPECT_GT(fs.samples, 1000u);
+    }
+  }
+}
+
+// The fast march yields exactly the reference march's samples (same k, same
+// point, same voxel), ray by ray, at several steps and from inside and outside
+// the object.
+TEST(Fast, MarchYieldsTheReferenceSamples) {
+  for (int res : {64, 256}) {
+    const SceneModel m = several_model(res, false);
+    const FastSkipGrid skip(m);
+    for (float step : {1.f, 0.43f, 2.5f}) {
+      const float delta = sample_spacing(m, step);
+      size_t total = 0;
+      for (const Camera& cam : {views(23, 19)[0], views(23, 19)[2], orbit_camera(17, 17, 40, 10, 0.3, 120)}) {
+        for (int y = 0; y < cam.height; ++y)
+          for (int x = 0; x < cam.width; ++x) {
+            const Ray ray = cam.pixel_ray(x, y);
+            const MicroRay mr = make_micro_ray(m, ray, delta);
+            SampleMarcher ref(m, ray, mr, true);
+            FastMarcher fast(m, skip, ray, mr);
+            MarchSample a, b;
+            for (;;) {
+              const bool more = ref.next(a);
+              ASSERT_EQ(fast.next(b), more) << res << " " << step << " " << x << "," << y;
+              if (!more) break;
+              ASSERT_EQ(a.k, b.k);
+              ASSERT_EQ(a.voxel, b.voxel);
+              ++total;
+            }
+          }
+      }
+      EXPECT_GT(total, 200u) << res << " " << step;
+    }
+  }
+}
+
+TEST(Fast, SkipGridHoldsChebyshevDistances) {
+  const SceneModel m = several_model(64, false);
+  const FastSkipGrid g(m);
+  const Bitmap3& fine = m.occupancy[int(Tier::Fine)];
+  const int r = m.fine_res();
+  // Brute force at a spread of voxels.
+  for (int z = 0; z < r; z += 3)
+    for (int y = 1; y < r; y += 5)
+      for (int x = 2; x < r; x += 7) {
+        int best = FastSkipGrid::kMaxDistance;
+        for (int c = 0; c < r * r * r; ++c) {
+          const int cx = c % r, cy = (c / r) % r, cz = c / (r * r);
+          if (fine.get(cx, cy, cz))
+            best = std::min(best, std::max({std::abs(cx - x), std::abs(cy - y), std::abs(cz - z)}));
+        }
+        ASSERT_EQ(int(g.at(x, y, z)), best) << x << "," << y << "," << z;
+      }
+}
+
+TEST(Fast, FloatPathMatchesTheReferenceAtOtherSettings) {
+  const SceneModel m = several_model(64);
+  RenderSettings s;
+  s.step_micro = 0.37f;
+  s.transmittance_min = 0.05f;
+  s.background[0] = 0.2f;
+  s.background[1] = 0.f;
+  s.background[2] = 0.9f;
+  const FastRenderer fast(m, ModelForm::Auto, FastPath::Float);
+  for (const Camera& cam : views(33, 70)) {
+    RenderStats rs, fs;
+    const Image ref = render_reference(m, cam, s, &rs);
+    EXPECT_GE(psnr(fast.render(cam, s, &fs), ref), 50.0);
+    EXPECT_EQ(fs.samples, rs.samples);
+  }
+}
+
+TEST(Fast, ImageDoesNotDependOnTheThreadCount) {
+  const SceneModel m = several_model(64, false);
+  for (FastPath path : {FastPath::Int8, FastPath::Float}) {
+    const FastRenderer fast(m, ModelForm::Auto, path);
+    RenderSettings s;
+    const Camera cam = views(80, 80)[0];
+    s.threads = 1;
+    const Image a = fast.render(cam, s);
+    s.threads = 3;
+    const Image b = fast.render(cam, s);
+    EXPECT_EQ(a.data, b.data);
+  }
+}
+
+TEST(Fast, RaysThatMissGiveExactlyTheBackground) {
+  const SceneModel m = several_model(32, false);
+  // Looking away from the scene.
+  Camera cam = orbit_camera(20, 20, 0, 0, 4, 40);
+  for (int i = 0; i < 3; ++i) cam.c2w[4 * i + 2] = -cam.c2w[4 * i + 2];  // camera -Z now points away
+  RenderSettings s;
+  s.background[0] = 0.25f;
+  s.background[1] = 0.5f;
+  s.background[2] = 0.75f;
+  RenderStats stats;
+  const Image img = FastRenderer(m, ModelForm::Auto, FastPath::Auto).render(cam, s, &stats);
+  for (size_t i = 0; i < img.data.size(); ++i) EXPECT_EQ(img.data[i], s.background[i % 3]);
+  EXPECT_EQ(stats.rays, 400u);
+  EXPECT_EQ(stats.samples, 0u);
+}
+
+TEST(Fast, Int8PathIsCloseToTheReference) {
+  // The INT8 path quantizes activations: close to the float image, not equal.
+  const SceneModel m = several_model(128, false);
+  const FastRenderer fast(m, ModelForm::Auto, FastPath::Auto);
+  ASSERT_EQ(fast.arithmetic(), FastArithmetic::Int8);
+  RenderSettings s;
+  for (const Camera& cam : views(40, 40)) {
+    const double db = psnr(fast.render(cam, s), render_reference(m, cam, s));
+    EXPECT_GE(db, 35.0);
+    EXPECT_LT(db, 200.0);
+  }
+}
+
+TEST(Fast, BadInputIsRefused) {
+  const SceneModel m = several_model(32);
+  EXPECT_THROW(FastRenderer(m, ModelForm::Float, FastPath::Int8), Error);  // no INT8 arithmetic on float data
+  const SceneModel q = several_model(32, false);
+  EXPECT_THROW(FastRenderer(q, ModelForm::Float, FastPath::Float), Error);  // no float form stored
+  const FastRenderer fast(m, ModelForm::Auto, FastPath::Auto);
+  const Camera cam = views(8, 8)[0];
+  RenderSettings s;
+  s.threads = -1;
+  EXPECT_THROW(fast.render(cam, s), Error);
+  s = RenderSettings{};
+  s.step_micro = 0.f;
+  EXPECT_THROW(fast.render(cam, s), Error);
+  s = RenderSettings{};
+  s.transmittance_min = 2.f;
+  EXPECT_THROW(fast.render(cam, s), Error);
+  Camera empty = cam;
+  empty.width = 0;
+  EXPECT_THROW(fast.render(empty, RenderSettings{}), Error);
+  SceneModel broken = m;
+  broken.mlps_f32[0].density[0].w.pop_back();
+  EXPECT_THROW(FastRenderer(broken, ModelForm::Float, FastPath::Float), Error);
+  SceneModel unfinalized = m;
+  unfinalized.coarse_to_mlp.clear();
+  EXPECT_THROW(FastRenderer(unfinalized, ModelForm::Auto, FastPath::Auto), Error);
+}
+
+}  // namespace
+}  // namespace edrnr
