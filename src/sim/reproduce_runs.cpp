@@ -200,11 +200,21 @@ std::string run_key(const ReproScene& scene, const ReproView& view, const SimCon
     text += "none";
   else
     text += run_hash(view.ground_truth.data.data(), view.ground_truth.data.size() * sizeof(float));
-  text += "\nconfig\n" + config_yaml_text(config);
+  text += "\nconfig\n" + config_identity_text(config);
+  return run_hash(text.data(), text.size());
+}
+
+std::string config_identity_text(const SimConfig& config) {
+  std::string text = config_yaml_text(config);
   // The config names its energy tables by path: their contents are part of
   // the key too, so an edited table (a refitted row) runs again.
   for (const std::filesystem::path& table : {config.energy.events_csv, config.energy.leakage_csv})
     text += "\ntable " + (table.empty() ? std::string("none") : read_file_text(table));
+  return text;
+}
+
+std::string config_hash(const SimConfig& config) {
+  const std::string text = config_identity_text(config);
   return run_hash(text.data(), text.size());
 }
 

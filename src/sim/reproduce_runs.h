@@ -81,6 +81,13 @@ struct RunSpec {
   std::string key;
 };
 
+// The text that identifies a resolved config: sim_config_to_yaml, then the
+// contents of its energy tables (a refitted table row is a different config).
+std::string config_identity_text(const SimConfig& config);
+// run_hash of config_identity_text: one config, one hash (edrnr sweep's
+// config_hash).
+std::string config_hash(const SimConfig& config);
+
 // The cache key of a run (see the top of this file).
 std::string run_key(const ReproScene& scene, const ReproView& view, const SimConfig& config);
 
