@@ -6,10 +6,17 @@
 # statistics JSON, resolved config and a Chrome trace to ./demo-out/.
 #
 # Overrides: MODEL=file.edrnr  DATASET=nerf_synthetic/<scene>  VIEW=N  OUT=dir
+#
+# ./scripts/demo.sh --serve: the same set-up and build, then the web app
+# (edrnr serve, docs/web.md) on http://127.0.0.1:${PORT:-8080}/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/setup.sh
 ./scripts/build.sh
+if [ "${1:-}" = "--serve" ]; then
+  echo "demo: open http://127.0.0.1:${PORT:-8080}/ in a browser (Ctrl-C stops the server)"
+  exec ./build/edrnr serve --port "${PORT:-8080}"
+fi
 OUT=${OUT:-demo-out}
 mkdir -p "$OUT"
 

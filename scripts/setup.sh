@@ -9,7 +9,13 @@ PACKAGES=(
   libspng-dev zlib1g-dev libeigen3-dev libhwy-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-matplotlib   # scripts/report_figures.py (edrnr reproduce)
+  pybind11-dev python3-dev python3-numpy   # the Python module (python/)
+  openmpi-bin libopenmpi-dev   # edrnr sweep across MPI ranks
+  libcpp-httplib-dev           # edrnr serve
+  nodejs chromium              # scripts/build-web.sh (the front end) and its browser tests (tests/web)
 )
+# npm comes with some nodejs builds (NodeSource's) and is a package of its own on Debian.
+command -v npm >/dev/null 2>&1 || PACKAGES+=(npm)
 
 missing=()
 for p in "${PACKAGES[@]}"; do
