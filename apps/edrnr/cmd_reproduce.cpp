@@ -6,7 +6,6 @@
 // CSV files, report.md, and (scripts/report_figures.py, matplotlib) the
 // figures and a self-contained report.html. docs/reproduction.md.
 #include <fmt/format.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -32,6 +31,7 @@
 #include "sim/reproduce_report.h"
 #include "sim/reproduce_runs.h"
 #include "sim/simulator.h"
+#include "subprocess.h"
 
 namespace edrnr::cli {
 namespace {
@@ -163,22 +163,9 @@ sim::ReproScene dataset_scene(const std::string& name, const fs::path& model_pat
 // Runs `python script args...`, where python is a name looked up in PATH or a
 // path. Returns its exit status (127: python could not be started).
 int run_python(const std::string& python, const fs::path& script, const std::vector<std::string>& script_args) {
-  std::fflush(stdout);
-  std::fflush(stderr);
-  const pid_t pid = fork();
-  if (pid < 0) return 127;
-  if (pid == 0) {
-    std::vector<std::string> args = {python, script.string()};
-    args.insert(args.end(), script_args.begin(), script_args.end());
-    std::vector<char*> argv;
-    for (std::string& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    execvp(python.c_str(), argv.data());
-    _exit(127);
-  }
-  int status = 0;
-  if (waitpid(pid, &status, 0) < 0) return 127;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : 128;
+  std::vector<std::string> argv = {python, script.string()};
+  argv.insert(argv.end(), script_args.begin(), script_args.end());
+  return run_program(argv);
 }
 
 // Draws the figures and writes report.html with scripts/report_figures.py.

@@ -3,7 +3,6 @@
 // ranks (started by mpirun), or as shards of a Slurm job array; writes the
 // results table, the Pareto front and its plot.
 #include <fmt/format.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cstdio>
@@ -19,6 +18,7 @@
 #include "core/file_io.h"
 #include "core/limits.h"
 #include "search_paths.h"
+#include "subprocess.h"
 #include "sweep/pareto.h"
 #include "sweep/plan.h"
 #include "sweep/runner.h"
@@ -134,23 +134,11 @@ void write_slurm_scripts(const SweepOptions& o, const sweep::SweepPlan& plan) {
   fmt::print("submit with: {}/submit.sh\n", slurm.string());
 }
 
+// Runs `python args...`; its exit status (127: python could not be started).
 int run_python(const std::string& python, const std::vector<std::string>& args) {
-  std::fflush(stdout);
-  std::fflush(stderr);
-  const pid_t pid = fork();
-  if (pid < 0) return 127;
-  if (pid == 0) {
-    std::vector<std::string> a = {python};
-    a.insert(a.end(), args.begin(), args.end());
-    std::vector<char*> argv;
-    for (std::string& s : a) argv.push_back(s.data());
-    argv.push_back(nullptr);
-    execvp(python.c_str(), argv.data());
-    _exit(127);
-  }
-  int status = 0;
-  if (waitpid(pid, &status, 0) < 0) return 127;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : 128;
+  std::vector<std::string> argv = {python};
+  argv.insert(argv.end(), args.begin(), args.end());
+  return run_program(argv);
 }
 
 // pareto.csv, and pareto.png through scripts/pareto.py (matplotlib).

@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <map>
 
+#include "sweep/table.h"
+
 namespace edrnr::sweep {
 
 namespace {
@@ -13,15 +15,6 @@ bool dominates(const ParetoPoint& a, const ParetoPoint& b) {
   const bool no_worse = a.fps >= b.fps && a.nJ_per_pixel <= b.nJ_per_pixel && a.sram_bytes <= b.sram_bytes;
   const bool better = a.fps > b.fps || a.nJ_per_pixel < b.nJ_per_pixel || a.sram_bytes < b.sram_bytes;
   return no_worse && better;
-}
-
-std::string cell(const nlohmann::json& v) {
-  if (v.is_null()) return "";
-  std::string s = v.is_string() ? v.get<std::string>() : v.dump();
-  if (s.find_first_of(",\"\n\r") == std::string::npos) return s;
-  std::string q = "\"";
-  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
-  return q + "\"";
 }
 
 }  // namespace
@@ -70,7 +63,7 @@ std::vector<ParetoPoint> pareto_points(const SweepPlan& plan, const std::map<std
 
 std::string pareto_csv(const SweepPlan& plan, const std::vector<ParetoPoint>& points) {
   std::string out = "point";
-  for (const std::string& k : plan.varied) out.append(",").append(cell(k));
+  for (const std::string& k : plan.varied) out.append(",").append(csv_cell(k));
   out += ",config_hash,fps,nJ_per_pixel,sram_total_bytes,on_front,design\n";
   std::vector<ParetoPoint> rows;
   for (const ParetoPoint& p : points)
@@ -79,7 +72,7 @@ std::string pareto_csv(const SweepPlan& plan, const std::vector<ParetoPoint>& po
   for (const ParetoPoint& p : rows) {
     const Point& pt = plan.points[p.point];
     out += std::to_string(p.point);
-    for (size_t i = 0; i < plan.varied.size(); ++i) out.append(",").append(cell(yaml_to_json(pt.values[i])));
+    for (size_t i = 0; i < plan.varied.size(); ++i) out.append(",").append(csv_cell(yaml_to_json(pt.values[i])));
     out += fmt::format(",{},{},{},{},{},{}\n", pt.config_hash, nlohmann::json(p.fps).dump(),
                        nlohmann::json(p.nJ_per_pixel).dump(), p.sram_bytes, p.on_front ? 1 : 0, p.base ? "base" : "");
   }

@@ -13,15 +13,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string csv_cell(const nlohmann::ordered_json& v) {
-  if (v.is_null()) return "";
-  std::string s = v.is_string() ? v.get<std::string>() : v.dump();
-  if (s.find_first_of(",\"\n\r") == std::string::npos) return s;
-  std::string q = "\"";
-  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
-  return q + "\"";
-}
-
 const nlohmann::ordered_json& cell(const Row& row, const std::string& column, const SweepPlan& plan) {
   static const nlohmann::ordered_json null;
   for (const std::string& k : plan.varied)
@@ -32,6 +23,15 @@ const nlohmann::ordered_json& cell(const Row& row, const std::string& column, co
 }
 
 }  // namespace
+
+std::string csv_cell(const nlohmann::ordered_json& v) {
+  if (v.is_null()) return "";
+  std::string s = v.is_string() ? v.get<std::string>() : v.dump();
+  if (s.find_first_of(",\"\n\r") == std::string::npos) return s;
+  std::string q = "\"";
+  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
 
 fs::path results_jsonl_path(const fs::path& dir) { return dir / "results.jsonl"; }
 fs::path results_csv_path(const fs::path& dir) { return dir / "results.csv"; }

@@ -33,6 +33,9 @@ std::map<std::string, Row> read_shard_rows(const std::filesystem::path& dir);
 std::string rows_jsonl(const SweepPlan& plan, const std::map<std::string, Row>& rows);
 // The CSV text of the plan's rows, plan order; a missing metric is an empty
 // cell, text with a comma, quote or line break is quoted.
+// One CSV cell for a JSON value (RFC 4180 quoting when needed; null is empty).
+std::string csv_cell(const nlohmann::ordered_json& v);
+
 std::string rows_csv(const SweepPlan& plan, const std::map<std::string, Row>& rows);
 
 // Writes results.jsonl and results.csv atomically.
