@@ -21,7 +21,7 @@ using Clock = std::chrono::steady_clock;
 constexpr int kTile = 16;                                 // tile edge, pixels
 constexpr int kTileRays = kTile * kTile;                  // rays per packet (a multiple of every SIMD width)
 constexpr int kFirstRoundSamples = 4;                     // samples a ray hands over in the first round
-constexpr int kMaxRoundSamples = 32;                      // ... doubling each round up to this
+constexpr int kMaxRoundSamples = 8;                       // ... doubling each round up to this
 constexpr int kCvMicro = kMicroPerFine * kFinePerCoarse;  // micro voxels per coarse voxel edge
 
 void check_inputs(const Camera& camera, const RenderSettings& s) {
@@ -73,6 +73,8 @@ struct TileWork {
   bool exhausted[kTileRays];  // its march has ended
   uint32_t begin[kTileRays], end[kTileRays];
   std::vector<FastSample> samples;
+  std::vector<MarchSample> group_samples;  // fast_march_group's output
+  std::vector<int32_t> group_blocks;
   std::vector<FastSampleOut> outs;
   std::vector<uint32_t> order, count, first, used;
 };
@@ -131,13 +133,18 @@ class TileRenderer {
       // Traversal: each open ray's next samples, contiguous per ray.
       w.samples.clear();
       bool any = false;
+      int group[kFastMarchGroup], g = 0;
       for (int r = 0; r < n; ++r) {
-        w.begin[r] = w.end[r] = uint32_t(w.samples.size());
+        w.begin[r] = w.end[r] = 0;
         if (!w.open[r]) continue;
         any = true;
-        gather(w, r, per_ray, tot);
-        w.end[r] = uint32_t(w.samples.size());
+        group[g++] = r;
+        if (g == kFastMarchGroup) {
+          gather(w, group, g, per_ray, tot);
+          g = 0;
+        }
       }
+      if (g > 0) gather(w, group, g, per_ray, tot);
       if (!any) break;
       if (profile_) traversal += since(t);
       if (!w.samples.empty()) {
@@ -190,35 +197,42 @@ class TileRenderer {
   }
 
  private:
-  // Up to `limit` samples of ray r; marks the ray exhausted when its march ends.
-  void gather(TileWork& w, int r, int limit, ThreadTotals& tot) const {
-    FastMarcher& march = w.marchers[size_t(r)];
+  // Up to `limit` samples of each ray group[i], i < g (rays in increasing
+  // order), marched together; marks the rays whose march ends exhausted.
+  void gather(TileWork& w, const int* group, int g, int limit, ThreadTotals& tot) const {
     const int cr = m_.coarse_res();
-    MarchSample s;
-    for (int k = 0; k < limit;) {
-      if (!march.next(s)) {
-        w.exhausted[r] = true;
-        return;
+    FastMarcher* marchers[kFastMarchGroup];
+    for (int i = 0; i < g; ++i) marchers[i] = &w.marchers[size_t(group[i])];
+    w.group_samples.resize(size_t(kFastMarchGroup) * size_t(limit));
+    w.group_blocks.resize(w.group_samples.size());
+    int counts[kFastMarchGroup];
+    bool ended[kFastMarchGroup];
+    fast_march_group(marchers, g, limit, w.group_samples.data(), w.group_blocks.data(), counts, ended);
+    for (int i = 0; i < g; ++i) {
+      const int r = group[i];
+      if (ended[i]) w.exhausted[r] = true;
+      w.begin[r] = uint32_t(w.samples.size());
+      for (int j = 0; j < counts[i]; ++j) {
+        const MarchSample& s = w.group_samples[size_t(i) * size_t(limit) + size_t(j)];
+        const int32_t block = w.group_blocks[size_t(i) * size_t(limit) + size_t(j)];
+        const Vec3i& v = s.voxel;
+        const int32_t mlp = m_.coarse_to_mlp[linear_index(v.x / kCvMicro, v.y / kCvMicro, v.z / kCvMicro, cr)];
+        if (mlp < 0 || block < 0) {
+          ++tot.missing;
+          continue;
+        }
+        FastSample f;
+        f.ray = uint32_t(r);
+        f.mlp = uint32_t(mlp);
+        const int lx = v.x & (kMicroPerFine - 1), ly = v.y & (kMicroPerFine - 1), lz = v.z & (kMicroPerFine - 1);
+        f.vertex =
+            uint32_t(size_t(block) * kBlockVerts + size_t(lx + kBlockVertsPerAxis * (ly + kBlockVertsPerAxis * lz)));
+        f.fx = s.p_micro.x - float(v.x);
+        f.fy = s.p_micro.y - float(v.y);
+        f.fz = s.p_micro.z - float(v.z);
+        w.samples.push_back(f);
       }
-      const Vec3i& v = s.voxel;
-      const int32_t mlp = m_.coarse_to_mlp[linear_index(v.x / kCvMicro, v.y / kCvMicro, v.z / kCvMicro, cr)];
-      const Vec3i fine{v.x / kMicroPerFine, v.y / kMicroPerFine, v.z / kMicroPerFine};
-      const int32_t block = march.block();
-      if (mlp < 0 || block < 0) {
-        ++tot.missing;
-        continue;
-      }
-      FastSample f;
-      f.ray = uint32_t(r);
-      f.mlp = uint32_t(mlp);
-      const int lx = v.x - kMicroPerFine * fine.x, ly = v.y - kMicroPerFine * fine.y, lz = v.z - kMicroPerFine * fine.z;
-      f.vertex =
-          uint32_t(size_t(block) * kBlockVerts + size_t(lx + kBlockVertsPerAxis * (ly + kBlockVertsPerAxis * lz)));
-      f.fx = s.p_micro.x - float(v.x);
-      f.fy = s.p_micro.y - float(v.y);
-      f.fz = s.p_micro.z - float(v.z);
-      w.samples.push_back(f);
-      ++k;
+      w.end[r] = uint32_t(w.samples.size());
     }
   }
 

@@ -114,13 +114,6 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
 
 FastMarcher::FastMarcher(const SceneModel& model, const FastSkipGrid& skip, const Ray& ray, const MicroRay& micro_ray)
     : model_(&model), skip_(&skip), ray_(micro_ray) {
-  for (int a = 0; a < 3; ++a) inv_dir_[a] = ray_.dir[a] != 0.f ? 1.0 / double(ray_.dir[a]) : 0.0;
-  inv_delta_ = 1.0 / double(ray_.delta);
-  // A step of at least half a micro voxel along the ray (in micro units).
-  const double step_micro =
-      double(ray_.delta) *
-      std::sqrt(double(ray_.dir.x) * ray_.dir.x + double(ray_.dir.y) * ray_.dir.y + double(ray_.dir.z) * ray_.dir.z);
-  small_step_ = step_micro >= 0.5;
   // The candidate range of SampleMarcher with the tiers: one step either side of the region.
   double t_near, t_far;
   if (!intersect_box(ray.origin, ray.dir, skip.region, t_near, t_far) || !(t_far >= 0) || !std::isfinite(t_far) ||
@@ -131,87 +124,128 @@ FastMarcher::FastMarcher(const SceneModel& model, const FastSkipGrid& skip, cons
   const double first = std::min(std::max(t_near, 0.0) / delta - 0.5, 4e18), last = std::min(t_far / delta - 0.5, 4e18);
   k_ = std::max<int64_t>(0, int64_t(-ceil_small(-first)) - 1);
   k_end_ = int64_t(ceil_small(last)) + 1;
+  // A step of at least half a micro voxel along the ray (in micro units).
+  const double step_micro = delta * std::sqrt(double(ray_.dir.x) * ray_.dir.x + double(ray_.dir.y) * ray_.dir.y +
+                                              double(ray_.dir.z) * ray_.dir.z);
+  small_step_ = step_micro >= 0.5;
   // A candidate's float point o_m + d_m t_k (t_k rounded, then one rounding
   // per operation) lies within 3 float steps of max(|o_m|, |d_m t_k|, |p_k|)
   // of the exact line: less than scale * 2^-22. The margin is 8 times that.
-  const double t_max = (double(k_end_) + 1.5) * double(ray_.delta);
+  const double t_max = (double(k_end_) + 1.5) * delta;
   double scale = double(model.micro_res);
   for (int a = 0; a < 3; ++a)
     scale = std::max(scale, std::abs(double(ray_.origin[a])) + std::abs(double(ray_.dir[a])) * t_max);
   margin_ = scale * (1.0 / 524288.0);  // 2^-19
+  // skip_box: the exit face lo + exit_ size at margin_ inside, in steps.
+  for (int a = 0; a < 3; ++a) {
+    const double d = double(ray_.dir[a]), o = double(ray_.origin[a]);
+    if (d == 0.0) {
+      exit_[a] = 0;
+      scale_[a] = 0;
+      offset_[a] = INFINITY;
+      continue;
+    }
+    const double inv = 1.0 / (d * delta);
+    exit_[a] = d > 0 ? 1.0 : 0.0;
+    scale_[a] = inv;
+    offset_[a] = ((d > 0 ? -margin_ : margin_) - o) * inv - 0.5;
+  }
 }
 
-int64_t FastMarcher::skip_box(int64_t k, const Vec3i& lo, int size) const {
-  // The last t at which the exact line o_m + d_m t is still margin_ inside
-  // every exit face of the box. Candidates up to there have float points in
-  // the box (their rounding error is below margin_), those from k on entered
-  // it already (each coordinate is monotone in k), so all of them can be
-  // skipped without computing one.
-  double t_safe = INFINITY;
-  for (int a = 0; a < 3; ++a) {
-    const double o = ray_.origin[a];
-    if (ray_.dir[a] > 0) t_safe = std::min(t_safe, (double(lo[a] + size) - margin_ - o) * inv_dir_[a]);
-    if (ray_.dir[a] < 0) t_safe = std::min(t_safe, (double(lo[a]) + margin_ - o) * inv_dir_[a]);
+uint64_t FastMarcher::mask_from_bitmap(const Vec3i& f) const {
+  const Bitmap3& micro = model_->occupancy[int(Tier::Micro)];
+  uint64_t m = 0;
+  for (int i = 0; i < 64; ++i)
+    if (micro.get(4 * f.x + (i & 3), 4 * f.y + ((i >> 2) & 3), 4 * f.z + (i >> 4))) m |= uint64_t(1) << i;
+  return m;
+}
+
+FastMarcher::Step FastMarcher::step(MarchSample& s) {
+  if (k_ > k_end_) return Step::End;
+  const int R = model_->micro_res;
+  const int64_t k = k_;
+  const Vec3f p = ray_.point(k);
+  Vec3i v;
+  if (!voxel_of(p, R, float(R), v)) {
+    k_ = k + 1;
+    return Step::More;
   }
-  const double x = t_safe * inv_delta_ - 0.5;  // candidates j <= x are inside
-  if (!(x < double(k_end_))) return k_end_ + 1;
-  return std::max(k + 1, int64_t(-ceil_small(-std::max(x, -4e18))) + 1);
+  const Vec3i f{v.x >> 2, v.y >> 2, v.z >> 2};
+  if (!(f == fine_)) {
+    ++checks_;
+    const int r = skip_->at(f.x, f.y, f.z);
+    if (r > 0) {  // the cube of fine voxels within r - 1 is empty
+      const Vec3i lo{4 * (f.x - r + 1), 4 * (f.y - r + 1), 4 * (f.z - r + 1)};
+      k_ = skip_box(k, lo, 4 * (2 * r - 1));
+      return Step::More;
+    }
+    fine_ = f;
+    block_ = model_->fine_to_block[linear_index(f.x, f.y, f.z, skip_->res)];
+    // An occupied fine voxel without a block (the model then breaks its
+    // invariants) reads its micro voxels from the bitmap.
+    mask_ = block_ >= 0 ? skip_->micro_mask[size_t(block_)] : mask_from_bitmap(f);
+  }
+  // Leaf cell and micro voxel from the fine voxel's mask. Empty ones hold a
+  // candidate or two (at the usual step of one micro voxel): stepping to the
+  // next candidate is cheaper than computing and checking the exit, and
+  // skips nothing.
+  const int lx = v.x & 3, ly = v.y & 3, lz = v.z & 3;
+  ++checks_;
+  constexpr uint64_t kLeafCell = 0x330033;  // micro voxels (0..1, 0..1, 0..1) of a fine voxel
+  if (!(mask_ & (kLeafCell << ((lx & 2) + 4 * (ly & 2) + 16 * (lz & 2))))) {
+    k_ = small_step_ ? k + 1 : skip_box(k, {v.x & ~1, v.y & ~1, v.z & ~1}, 2);
+    return Step::More;
+  }
+  ++checks_;
+  if (!((mask_ >> (lx + 4 * ly + 16 * lz)) & 1)) {
+    k_ = small_step_ ? k + 1 : skip_box(k, v, 1);
+    return Step::More;
+  }
+  s.k = k;
+  s.p_micro = p;
+  s.voxel = v;
+  k_ = k + 1;
+  return Step::Sample;
 }
 
 bool FastMarcher::next(MarchSample& s) {
-  const int R = model_->micro_res;
-  const float Rf = float(R);
-  while (k_ <= k_end_) {
-    const int64_t k = k_;
-    const Vec3f p = ray_.point(k);
-    Vec3i v;
-    if (!voxel_of(p, R, Rf, v)) {
-      k_ = k + 1;
-      continue;
-    }
-    const Vec3i f{v.x >> 2, v.y >> 2, v.z >> 2};
-    if (!(f == fine_)) {
-      ++checks_;
-      const int r = skip_->at(f.x, f.y, f.z);
-      if (r > 0) {  // the cube of fine voxels within r - 1 is empty
-        const Vec3i lo{4 * (f.x - r + 1), 4 * (f.y - r + 1), 4 * (f.z - r + 1)};
-        k_ = skip_box(k, lo, 4 * (2 * r - 1));
-        continue;
-      }
-      fine_ = f;
-      block_ = model_->fine_to_block[linear_index(f.x, f.y, f.z, skip_->res)];
-      if (block_ >= 0) {
-        mask_ = skip_->micro_mask[size_t(block_)];
-      } else {  // an occupied fine voxel without a block: read its micro voxels from the bitmap
-        const Bitmap3& micro = model_->occupancy[int(Tier::Micro)];
-        mask_ = 0;
-        for (int i = 0; i < 64; ++i)
-          if (micro.get(4 * f.x + (i & 3), 4 * f.y + ((i >> 2) & 3), 4 * f.z + (i >> 4))) mask_ |= uint64_t(1) << i;
-      }
-    }
-    // Leaf cell and micro voxel from the fine voxel's mask. Empty ones hold a
-    // candidate or two (at the usual step of one micro voxel): stepping to the
-    // next candidate is cheaper than computing and checking the exit, and
-    // skips nothing.
-    const int lx = v.x & 3, ly = v.y & 3, lz = v.z & 3;
-    ++checks_;
-    constexpr uint64_t kLeafCell = 0x330033;  // micro voxels (0..1, 0..1, 0..1) of a fine voxel
-    if (!(mask_ & (kLeafCell << ((lx & 2) + 4 * (ly & 2) + 16 * (lz & 2))))) {
-      k_ = small_step_ ? k + 1 : skip_box(k, {v.x & ~1, v.y & ~1, v.z & ~1}, 2);
-      continue;
-    }
-    ++checks_;
-    if (!((mask_ >> (lx + 4 * ly + 16 * lz)) & 1)) {
-      k_ = small_step_ ? k + 1 : skip_box(k, v, 1);
-      continue;
-    }
-    s.k = k;
-    s.p_micro = p;
-    s.voxel = v;
-    k_ = k + 1;
-    return true;
+  for (;;) {
+    const Step st = step(s);
+    if (st == Step::Sample) return true;
+    if (st == Step::End) return false;
   }
-  return false;
+}
+
+void fast_march_group(FastMarcher* const* marchers, int n, int limit, MarchSample* samples, int32_t* blocks,
+                      int* counts, bool* ended) {
+  // The marchers' iterations interleaved: their dependency chains (point,
+  // voxel, lookup, jump) are independent, so the CPU overlaps them.
+  int active = 0;
+  bool done[kFastMarchGroup];
+  for (int i = 0; i < n; ++i) {
+    counts[i] = 0;
+    ended[i] = false;
+    done[i] = limit <= 0;
+    active += !done[i];
+  }
+  while (active > 0) {
+    for (int i = 0; i < n; ++i) {
+      if (done[i]) continue;
+      FastMarcher& m = *marchers[i];
+      const size_t at = size_t(i) * size_t(limit) + size_t(counts[i]);
+      const FastMarcher::Step st = m.step(samples[at]);
+      if (st == FastMarcher::Step::Sample) {
+        blocks[at] = m.block();
+        if (++counts[i] == limit) {
+          done[i] = true;
+          --active;
+        }
+      } else if (st == FastMarcher::Step::End) {
+        ended[i] = done[i] = true;
+        --active;
+      }
+    }
+  }
 }
 
 }  // namespace edrnr

@@ -21,6 +21,7 @@
 //     candidates lie in the box: no sample is ever skipped, and no candidate
 //     needs computing to check the jump. The candidate reached may still be
 //     in the box; it is then tested like any other.
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -52,6 +53,9 @@ class FastMarcher {
 
   // The next sample; false once the ray has no more.
   bool next(MarchSample& s);
+  // One candidate of the march: End (no more), Sample (s filled) or More.
+  enum class Step { More, Sample, End };
+  Step step(MarchSample& s);
   // Bitmap and distance lookups so far.
   uint64_t occupancy_checks() const { return checks_; }
   // The feature block of the last sample's fine voxel (-1: none; the model
@@ -59,16 +63,37 @@ class FastMarcher {
   int32_t block() const { return block_; }
 
  private:
+  // The micro mask of an occupied fine voxel read from the micro bitmap
+  // (for fine voxels without a feature block).
+  uint64_t mask_from_bitmap(const Vec3i& fine) const;
   // A candidate after k (whose point lies in the box of `size` micro voxels
   // from micro voxel `lo`) such that every candidate between them lies in the
   // box: the last one whose exact ray point is at least margin_ inside it.
-  int64_t skip_box(int64_t k, const Vec3i& lo, int size) const;
+  int64_t skip_box(int64_t k, const Vec3i& lo, int size) const {
+    // x_a: the candidate position j (t = (j + 0.5) delta) at which the exact
+    // line o_m + d_m t is margin_ inside the box's exit face on axis a;
+    // exit_[a] selects the face (1: lo + size, 0: lo); axes the ray does not
+    // move along give +inf (scale_ 0, offset_ +inf). Candidates up to min_a
+    // x_a have float points in the box (their rounding error is below
+    // margin_), those from k on entered it already (each coordinate is
+    // monotone in k), so all of them can be skipped without computing one.
+    const double x0 = (double(lo.x) + double(size) * exit_[0]) * scale_[0] + offset_[0];
+    const double x1 = (double(lo.y) + double(size) * exit_[1]) * scale_[1] + offset_[1];
+    const double x2 = (double(lo.z) + double(size) * exit_[2]) * scale_[2] + offset_[2];
+    const double x = std::min(x0, std::min(x1, x2));  // candidates j <= x are inside
+    if (!(x < double(k_end_))) return k_end_ + 1;
+    const double xc = std::max(x, -4e18);
+    const int64_t t = int64_t(xc);                        // toward zero
+    const int64_t floor_x = t - int64_t(xc < double(t));  // floor
+    return std::max(k + 1, floor_x + 1);
+  }
 
   const SceneModel* model_;
   const FastSkipGrid* skip_;
   MicroRay ray_;
-  double inv_dir_[3];
-  double inv_delta_ = 0;
+  // skip_box's terms per axis: the exit face (0 or 1), 1 / (d_a delta) and
+  // (-/+ margin - o_a) / (d_a delta) - 0.5.
+  double exit_[3] = {0, 0, 0}, scale_[3] = {0, 0, 0}, offset_[3] = {0, 0, 0};
   double margin_ = 0;        // micro units: well above the rounding error of a candidate's float point
   bool small_step_ = false;  // empty leaf cells and micro voxels are passed by stepping
   int64_t k_ = 0, k_end_ = -1;
@@ -77,5 +102,15 @@ class FastMarcher {
   int32_t block_ = -1;      // its block
   uint64_t mask_ = 0;       // its micro mask
 };
+
+// The most marchers fast_march_group advances together.
+inline constexpr int kFastMarchGroup = 4;
+
+// Advances marchers[i], i < n <= kFastMarchGroup, with their iterations
+// interleaved, until each has `limit` more samples or has ended: sample j of
+// marcher i (and its block()) goes to samples[i * limit + j] (blocks[...]),
+// counts[i] says how many, ended[i] whether its march ended.
+void fast_march_group(FastMarcher* const* marchers, int n, int limit, MarchSample* samples, int32_t* blocks,
+                      int* counts, bool* ended);
 
 }  // namespace edrnr
