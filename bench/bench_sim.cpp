@@ -1,20 +1,34 @@
-// Host speed of the cycle simulator: one frame of the procedural "several"
-// scene (micro resolution 256, as `edrnr make-scene several`) through
-// simulate_chip, at 200x200 and 800x800, on one and two threads; and the
-// memory system's cost per core cycle; and the bundled lego model
-// (assets/lego.edrnr) from its first test view, the host-speed target's
-// workload. docs/simulator.md lists the figures.
+// Host speed of the cycle simulator, on the frames docs/simulator.md reports:
+//   lego  assets/lego.edrnr, test view 3 of ../shared/data/nerf_synthetic/lego, 800x800
+//   mic   assets/mic.edrnr, test view 3 of ../shared/data/nerf_synthetic/mic, 800x800
+//   proc  the procedural "several" scene (micro resolution 256, as
+//         `edrnr make-scene several`), orbit camera, 800x800 (and 200x200)
+// Each frame is simulated with simulate_chip on one and two threads, and
+// rendered by the reference renderer on one thread (`edrnr render --engine
+// reference --threads 1`: step 1, white background), so the ratio of the two
+// comes from one run. Models are loaded before the clock starts. Also the
+// memory system's cost per core cycle.
 //
-//   bench_sim --benchmark_filter=Frame/800    # the procedural scene, 800x800
-//   bench_sim --benchmark_filter=Lego         # the 60 s target (needs ../shared/data)
+//   bench_sim --benchmark_filter='BM_Simulate/frame:0/|BM_Reference/frame:0'   # lego
+//   bench_sim --benchmark_filter='BM_Simulate/frame:[0-3]/threads:1|BM_Simulate/frame:0/threads:2|BM_Reference'
+//   bench_sim --benchmark_filter=MemorySystem
+// Last figures (CPU s, one thread, docs/simulator.md "Host speed"): lego
+// 3.0-3.2 (2.1-2.4x the reference renderer's 1.3-1.5 in the same run), mic
+// 2.1-2.2, procedural 800x800 6.5-7.1, 200x200 0.86-0.90; lego on two
+// threads: 2.5-2.8 s on the timing thread.
+// A frame whose model or dataset is missing is skipped with a message.
 #include <benchmark/benchmark.h>
 
 #include <filesystem>
+#include <map>
+#include <memory>
+#include <string>
 
 #include "data/dataset.h"
 #include "model/model_io.h"
 #include "model/procedural.h"
 #include "render/cameras.h"
+#include "render/reference.h"
 #include "sim/memory_system.h"
 #include "sim/simulator.h"
 
@@ -22,32 +36,65 @@ namespace {
 
 using namespace edrnr;
 
-// The source tree this benchmark was built from (for the presets).
+// The source tree this benchmark was built from (for the presets and assets).
 const std::filesystem::path kSource = std::filesystem::path(__FILE__).parent_path().parent_path();
-
-const SceneModel& several() {
-  static const SceneModel m = [] {
-    ProceduralOptions o;
-    o.store_float = false;
-    return make_procedural_model("several", procedural_shapes("several"), o);
-  }();
-  return m;
-}
 
 const sim::SimConfig& preset() {
   static const sim::SimConfig c = sim::load_sim_config(kSource / "configs/chip/edr_nr_40nm.yaml");
   return c;
 }
 
-// args: image side, threads.
-void BM_SimulateFrame(benchmark::State& state) {
-  const SceneModel& m = several();
-  const Camera cam = orbit_camera(int(state.range(0)), int(state.range(0)), 30.0, 30.0, 4.0, 40.0);
+struct Workload {
+  std::unique_ptr<SceneModel> model;
+  Camera camera;
+  std::string missing;  // non-empty: why the workload cannot run
+};
+
+// Frame index: 0 lego, 1 mic, 2 procedural 800x800, 3 procedural 200x200.
+const Workload& workload(int64_t frame) {
+  static std::map<int64_t, Workload> cache;
+  auto it = cache.find(frame);
+  if (it != cache.end()) return it->second;
+  Workload w;
+  if (frame <= 1) {
+    const char* name = frame == 0 ? "lego" : "mic";
+    const std::filesystem::path model = kSource / "assets" / (std::string(name) + ".edrnr");
+    const std::filesystem::path data = kSource.parent_path() / "shared/data/nerf_synthetic" / name;
+    if (!std::filesystem::exists(model) || !std::filesystem::exists(data / "transforms_test.json")) {
+      w.missing = "needs " + model.string() + " and " + data.string();
+    } else {
+      w.model = std::make_unique<SceneModel>(load_model(model));
+      DatasetOptions d;
+      d.split = "test";
+      d.load_images = false;
+      w.camera = load_dataset(data, d).frames.at(3).camera;
+    }
+  } else {
+    ProceduralOptions o;
+    o.store_float = false;
+    w.model = std::make_unique<SceneModel>(make_procedural_model("several", procedural_shapes("several"), o));
+    const int side = frame == 2 ? 800 : 200;
+    w.camera = orbit_camera(side, side, 30.0, 30.0, 4.0, 40.0);
+  }
+  return cache.emplace(frame, std::move(w)).first->second;
+}
+
+const char* kFrameNames[] = {"lego", "mic", "proc800", "proc200"};
+
+// args: frame, threads. Counters: simulated cycles per host second, cycles and
+// samples of the frame.
+void BM_Simulate(benchmark::State& state) {
+  const Workload& w = workload(state.range(0));
+  if (!w.missing.empty()) {
+    state.SkipWithError(w.missing.c_str());
+    return;
+  }
+  state.SetLabel(kFrameNames[state.range(0)]);
   sim::SimOptions opt;
   opt.threads = int(state.range(1));
   uint64_t cycles = 0, samples = 0;
   for (auto _ : state) {
-    const sim::SimResult r = sim::simulate_chip(m, cam, preset(), opt);
+    const sim::SimResult r = sim::simulate_chip(*w.model, w.camera, preset(), opt);
     cycles += r.summary.cycles;
     samples += r.summary.samples;
   }
@@ -55,37 +102,27 @@ void BM_SimulateFrame(benchmark::State& state) {
   state.counters["samples_per_s"] = benchmark::Counter(double(samples), benchmark::Counter::kIsRate);
   state.counters["cycles_per_frame"] = double(cycles) / double(state.iterations());
 }
-BENCHMARK(BM_SimulateFrame)
-    ->Args({200, 1})
-    ->Args({200, 2})
-    ->Args({800, 1})
-    ->Args({800, 2})
+BENCHMARK(BM_Simulate)
+    ->ArgNames({"frame", "threads"})
+    ->ArgsProduct({{0, 1, 2}, {1, 2}})
+    ->Args({3, 1})
     ->Iterations(1)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
 
-// The bundled lego model, test view 0 of the dataset beside the source tree,
-// 800x800; skipped when the model or the dataset is missing.
-void BM_SimulateLego(benchmark::State& state) {
-  const std::filesystem::path model = kSource / "assets/lego.edrnr";
-  const std::filesystem::path data = kSource.parent_path() / "shared/data/nerf_synthetic/lego";
-  if (!std::filesystem::exists(model) || !std::filesystem::exists(data / "transforms_test.json")) {
-    state.SkipWithError("needs assets/lego.edrnr and ../shared/data/nerf_synthetic/lego");
+// The reference renderer on one thread, same frames (args: frame).
+void BM_Reference(benchmark::State& state) {
+  const Workload& w = workload(state.range(0));
+  if (!w.missing.empty()) {
+    state.SkipWithError(w.missing.c_str());
     return;
   }
-  const SceneModel m = load_model(model);
-  DatasetOptions d;
-  d.split = "test";
-  d.load_images = false;
-  const Camera cam = load_dataset(data, d).frames.at(0).camera;
-  sim::SimOptions opt;
-  opt.threads = int(state.range(0));
-  uint64_t cycles = 0;
-  for (auto _ : state) cycles += sim::simulate_chip(m, cam, preset(), opt).summary.cycles;
-  state.counters["sim_cycles_per_s"] = benchmark::Counter(double(cycles), benchmark::Counter::kIsRate);
-  state.counters["cycles_per_frame"] = double(cycles) / double(state.iterations());
+  state.SetLabel(kFrameNames[state.range(0)]);
+  RenderSettings s;
+  s.threads = 1;
+  for (auto _ : state) benchmark::DoNotOptimize(render_reference(*w.model, w.camera, s));
 }
-BENCHMARK(BM_SimulateLego)->Arg(1)->Arg(2)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
+BENCHMARK(BM_Reference)->ArgNames({"frame"})->DenseRange(0, 2)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
 
 // The DRAM model behind the clock crossing, per core cycle: idle, and with a
 // 1000-byte feature block read started every 200 core cycles.

@@ -1,5 +1,9 @@
 #include "chip/cfiu.h"
 
+#include <algorithm>
+#include <array>
+#include <vector>
+
 #include "core/error.h"
 
 namespace edrnr::chip {
@@ -35,20 +39,53 @@ int Cfiu::read_corners(uint32_t block, const SampleCoord& s) {
 void Cfiu::weighted_sum(uint32_t block, const SampleCoord& s, int32_t* out) const {
   const int fb = numerics_.interp_fraction_bits;
   const int64_t one = int64_t(1) << fb;
-  // Corner c = dx | dy << 1 | dz << 2: its vertex and trilinear coefficient.
-  std::array<int, 8> vertex{};
+  // Corner c = dx | dy << 1 | dz << 2: where its codes start and its
+  // trilinear coefficient.
+  const size_t F = size_t(channels_);
+  std::array<size_t, 8> first{};
   std::array<int64_t, 8> coef{};
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = c >> 1 & 1, dz = c >> 2 & 1;
-    vertex[size_t(c)] = block_vertex(s.local.x + dx, s.local.y + dy, s.local.z + dz);
+    const int vertex = block_vertex(s.local.x + dx, s.local.y + dy, s.local.z + dz);
+    first[size_t(c)] = (size_t(block) * kBlockVerts + size_t(vertex)) * F;
     coef[size_t(c)] =
         (dx ? s.frac[0] : one - s.frac[0]) * (dy ? s.frac[1] : one - s.frac[1]) * (dz ? s.frac[2] : one - s.frac[2]);
   }
+  // The coefficients sum to one (2^(3 fb)) exactly, so
+  //   sum coef (code - zp) = sum coef code - zp 2^(3 fb),
+  // the same integer.
+  const int64_t coef_sum = int64_t(1) << (3 * fb);
   const int shift = 3 * fb - numerics_.interp_feature_frac_bits;
-  for (int ch = 0; ch < channels_; ++ch) {
-    const int zp = model_.feature_quant.zero_point[size_t(ch)];
-    int64_t sum = 0;
-    for (int i = 0; i < 8; ++i) sum += coef[size_t(i)] * (int64_t(model_.feature_q(block, vertex[size_t(i)], ch)) - zp);
+  const uint8_t* q4 = model_.features_q4.data();  // two codes a byte, the even index low
+  // Corner by corner, two channels a byte where the codes pair up; integer
+  // sums, so the order does not change them.
+  constexpr size_t kLocalChannels = 64;
+  std::array<int64_t, kLocalChannels> local;
+  std::vector<int64_t> heap;
+  int64_t* sums = local.data();
+  if (F > kLocalChannels) {
+    heap.assign(F, 0);
+    sums = heap.data();
+  } else {
+    std::fill_n(sums, F, int64_t(0));
+  }
+  for (size_t i = 0; i < 8; ++i) {
+    const int64_t w = coef[i];
+    size_t at = first[i], ch = 0;
+    if (at & 1 && F > 0) {
+      sums[0] += w * int64_t(q4[at >> 1] >> 4);
+      ++at;
+      ch = 1;
+    }
+    const uint8_t* p = q4 + (at >> 1);
+    for (; ch + 1 < F; ch += 2, ++p) {
+      sums[ch] += w * int64_t(*p & 15);
+      sums[ch + 1] += w * int64_t(*p >> 4);
+    }
+    if (ch < F) sums[ch] += w * int64_t(*p & 15);
+  }
+  for (size_t ch = 0; ch < F; ++ch) {
+    const int64_t sum = sums[ch] - int64_t(model_.feature_quant.zero_point[ch]) * coef_sum;
     out[ch] =
         int32_t(fx::saturate(fx::shift_right_round(sum, shift, numerics_.rounding), numerics_.interp_feature_bits));
   }

@@ -16,7 +16,9 @@
 // A point belongs to micro voxel min(floor(p), Rm - 1) per axis when
 // 0 <= p <= Rm (the reference renderer's convention), and to the cell of a
 // tier with cells of S micro voxels given by that micro voxel divided by S.
+#include <bit>
 #include <cstdint>
+#include <vector>
 
 #include "core/custom_float.h"
 #include "core/vec.h"
@@ -47,15 +49,31 @@ class RayMath {
   double step() const { return step_; }
   int micro_res() const { return micro_res_; }
 
-  double t_of(int64_t k) const { return fmt_.mul(fmt_.round(double(k) + 0.5), step_); }
+  // t_k; the values of the candidates a frame visits come from a table
+  // filled at construction with the same arithmetic.
+  double t_of(int64_t k) const { return uint64_t(k) < t_table_.size() ? t_table_[size_t(k)] : t_exact(k); }
   double coord(const ChipRay& r, int64_t k, int axis) const { return fmt_.fma(r.dir[axis], t_of(k), r.origin[axis]); }
-  Vec3d point(const ChipRay& r, int64_t k) const;
+  Vec3d point(const ChipRay& r, int64_t k) const {
+    const double t = t_of(k);
+    return {fmt_.fma(r.dir.x, t, r.origin.x), fmt_.fma(r.dir.y, t, r.origin.y), fmt_.fma(r.dir.z, t, r.origin.z)};
+  }
 
   // The micro voxel of a point inside [0, Rm]^3 (clamped otherwise).
-  int micro_index(double c) const;
+  int micro_index(double c) const {
+    if (!(c >= 0.0)) return 0;
+    if (c >= double(micro_res_)) return micro_res_ - 1;
+    return int(c);  // c in [0, Rm): truncation is the floor
+  }
   Vec3i micro_voxel(const Vec3d& p) const { return {micro_index(p.x), micro_index(p.y), micro_index(p.z)}; }
   // The cell of a tier with cells of cell_micro micro voxels per axis.
-  Vec3i cell(const Vec3d& p, int cell_micro) const;
+  Vec3i cell(const Vec3d& p, int cell_micro) const {
+    const Vec3i m = micro_voxel(p);
+    if (std::has_single_bit(unsigned(cell_micro))) {  // m >= 0: a shift divides
+      const int s = std::countr_zero(unsigned(cell_micro));
+      return {m.x >> s, m.y >> s, m.z >> s};
+    }
+    return {m.x / cell_micro, m.y / cell_micro, m.z / cell_micro};
+  }
   Vec3i cell_at(const ChipRay& r, int64_t k, int cell_micro) const { return cell(point(r, k), cell_micro); }
 
   // The first candidate k in (k0, k_end) whose point is not in `cell` (cells
@@ -72,9 +90,12 @@ class RayMath {
   KInterval box_interval(const ChipRay& r, const Vec3d& lo, const Vec3d& hi, uint64_t* evals = nullptr) const;
 
  private:
+  double t_exact(int64_t k) const { return fmt_.mul(fmt_.round(double(k) + 0.5), step_); }
+
   FloatFormat fmt_;
   double step_;
   int micro_res_;
+  std::vector<double> t_table_;  // t_exact(k) for k in [0, size)
 };
 
 }  // namespace edrnr::chip

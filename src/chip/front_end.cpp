@@ -69,7 +69,7 @@ RayPacket FrontEnd::build(const PixelQuad& quad, const Vru& vru) {
     }
     s.k = run.begin;
     s.k_end = run.end;
-    s.dir_code = Tme::encode_direction(s.world_dir, model_.mlp_arch.dir_frequencies, n_);
+    if (encode_directions_) s.dir_code = Tme::encode_direction(s.world_dir, model_.mlp_arch.dir_frequencies, n_);
   }
   return p;
 }

@@ -37,6 +37,10 @@ class FrontEnd {
   // The packet of `quad`. Its live_mask() is 0 when no ray reaches the
   // traversal (all pixels take the background).
   RayPacket build(const PixelQuad& quad, const Vru& vru);
+  // On (the default): build() fills each traversed ray's dir_code. Off: it
+  // leaves dir_code empty for the consumer to encode (Tme::encode_direction
+  // of world_dir) where the ray's samples are evaluated.
+  void set_encode_directions(bool on) { encode_directions_ = on; }
 
   const Vec3d& box_lo() const { return lo_; }
   const Vec3d& box_hi() const { return hi_; }
@@ -51,6 +55,7 @@ class FrontEnd {
   Abt abt_;
   Tsps tsps_;
   FrontEndCounters counters_;
+  bool encode_directions_ = true;
 };
 
 }  // namespace edrnr::chip

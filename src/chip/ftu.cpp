@@ -46,6 +46,11 @@ uint64_t Ftu::micro_word(uint32_t fine_index) const {
 bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& batch) {
   const Bitmap3& fine = model_.occupancy[int(Tier::Fine)];
   const int cr = model_.coarse_res();
+  // Each ray's fine voxel at candidate known_k (a ray the LFAU did not
+  // select keeps its candidate, and its point depends on (ray, k) only).
+  std::array<int64_t, kRaysPerPacket> known_k{};
+  std::array<Vec3i, kRaysPerPacket> known_f{};
+  uint8_t known = 0;
   for (;;) {
     // The live rays inside the CV, and their fine voxels.
     uint8_t active = 0;
@@ -53,7 +58,12 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
     for (int r = 0; r < kRaysPerPacket; ++r) {
       const RayState& ray = rp.rays[size_t(r)];
       if (!ray.live()) continue;
-      const Vec3i f = math_.cell_at(ray.ray, ray.k, kMicroPerFine);
+      if (!(known >> r & 1) || known_k[size_t(r)] != ray.k) {
+        known_f[size_t(r)] = math_.cell_at(ray.ray, ray.k, kMicroPerFine);
+        known_k[size_t(r)] = ray.k;
+        known |= uint8_t(1u << r);
+      }
+      const Vec3i f = known_f[size_t(r)];
       const Vec3i c{f.x / kFinePerCoarse, f.y / kFinePerCoarse, f.z / kFinePerCoarse};
       if (linear_index(c.x, c.y, c.z, cr) != cv_tag) continue;
       active |= uint8_t(1u << r);

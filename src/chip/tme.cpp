@@ -4,6 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "chip/tme_kernel.h"
 #include "core/error.h"
 
 namespace edrnr::chip {
@@ -61,6 +62,41 @@ std::vector<TmeLayer> compile_net(const std::vector<DenseQ>& net, const std::vec
       t.requant[size_t(j)] = requant_or_fail(scale, n.requant_multiplier_bits, mlp, name);
       for (int i = 0; i < d.in; ++i)
         t.abs_weight_sum[size_t(j)] += std::abs(int64_t(t.w[size_t(j) * size_t(d.in) + size_t(i)]));
+    }
+    t.out_pad = int((size_t(t.out) + kTmeLanePad - 1) / kTmeLanePad * kTmeLanePad);
+    t.wt.assign(size_t(t.in) * size_t(t.out_pad), 0);
+    for (int j = 0; j < t.out; ++j)
+      for (int i = 0; i < t.in; ++i)
+        t.wt[size_t(i) * size_t(t.out_pad) + size_t(j)] = t.w[size_t(j) * size_t(t.in) + size_t(i)];
+    const int A = n.accumulator_bits;
+    const int64_t x_max = int64_t(1) << (n.activation_bits - 1);  // |x| <= 2^(activation_bits-1)
+    t.bias_sat.resize(size_t(d.out));
+    t.sum_exact.resize(size_t(d.out));
+    for (int j = 0; j < t.out; ++j) {
+      const int64_t b = fx::saturate(t.bias[size_t(j)], A);
+      t.bias_sat[size_t(j)] = b;
+      t.bias_saturations += b != t.bias[size_t(j)];
+      t.sum_exact[size_t(j)] = std::abs(b) + t.abs_weight_sum[size_t(j)] * x_max <= fx::max_signed(A);
+    }
+    t.requant_vector = hidden && A <= 32 && (n.rounding == fx::Rounding::Floor || n.rounding == fx::Rounding::HalfUp);
+    for (int j = 0; j < t.out && t.requant_vector; ++j) {
+      const fx::Requant& q = t.requant[size_t(j)];
+      t.requant_vector = t.sum_exact[size_t(j)] && q.multiplier >= 0 && q.multiplier == int32_t(q.multiplier) &&
+                         q.shift >= 0 && q.shift <= 62;
+    }
+    if (t.requant_vector) {
+      t.requant_rounding = n.rounding;
+      const size_t P = size_t(t.out_pad);
+      t.bias32.assign(P, 0);
+      t.mult32.assign(P, 0);
+      t.shift64.assign(P, 0);
+      t.half64.assign(P, 0);
+      for (size_t j = 0; j < size_t(t.out); ++j) {
+        t.bias32[j] = int32_t(t.bias_sat[j]);
+        t.mult32[j] = uint32_t(t.requant[j].multiplier);
+        t.shift64[j] = uint64_t(t.requant[j].shift);
+        if (n.rounding == fx::Rounding::HalfUp) t.half64[j] = (uint64_t(1) << t.requant[j].shift) >> 1;
+      }
     }
     out.push_back(std::move(t));
   }
@@ -133,84 +169,150 @@ void Tme::load(uint32_t cv_tag) {
   counters_.mlp_load_bytes += mlps_[size_t(m)].stored_bytes;
 }
 
-void Tme::layer(const TmeLayer& L, const int32_t* x, int32_t* y, bool hidden, int out_bits, int split,
-                const fx::Requant* split_q) {
-  const int A = n_.accumulator_bits;
-  const int main_in = split >= 0 ? split : L.in;
-  const int64_t acc_max = fx::max_signed(A);
-  const int64_t x_max = int64_t(1) << (n_.activation_bits - 1);  // |x| <= 2^(activation_bits-1)
-  for (int j = 0; j < L.out; ++j) {
-    int64_t acc = fx::saturate(L.bias[size_t(j)], A);
-    counters_.saturations += acc != L.bias[size_t(j)];
-    const int8_t* w = &L.w[size_t(j) * size_t(L.in)];
-    if (std::abs(acc) + L.abs_weight_sum[size_t(j)] * x_max <= acc_max) {
-      // No partial sum can reach the accumulator's limits: saturating after
-      // each addition would change nothing.
-      int64_t sum = 0;
-      for (int i = 0; i < main_in; ++i) sum += int32_t(w[i]) * x[i];
-      acc += sum;
-    } else {
-      for (int i = 0; i < main_in; ++i) {
-        const int64_t sum = acc + int64_t(w[i]) * x[i];
-        acc = fx::saturate(sum, A);
-        counters_.saturations += acc != sum;
-      }
-    }
-    if (split >= 0) {
-      // The direction products in an accumulator of their own (at most
-      // in * 2^14 in magnitude), then to accumulator units.
-      int64_t part = 0;
-      for (int i = split; i < L.in; ++i) part += int32_t(w[i]) * x[i];
-      const int64_t p = fx::saturate(part, A);
-      counters_.saturations += p != part;
-      const int64_t sum = acc + fx::requantize(p, *split_q, n_.rounding);
-      acc = fx::saturate(sum, A);
-      counters_.saturations += acc != sum;
-    }
-    counters_.macs += uint64_t(L.in);
-    const int64_t v = hidden ? std::max<int64_t>(acc, 0) : acc;
-    const int64_t r = fx::requantize(v, L.requant[size_t(j)], n_.rounding);
-    y[j] = int32_t(fx::saturate(r, out_bits));
-    counters_.saturations += y[j] != r;
+void Tme::direction_input(const std::vector<int32_t>& dir_code, TmeDirection& out) const {
+  out.x.resize(dir_code.size());
+  out.saturations = 0;
+  for (size_t i = 0; i < dir_code.size(); ++i) {
+    const int64_t r = fx::requantize(dir_code[i], dir_code_, n_.rounding);
+    const int64_t v = fx::saturate(r, n_.activation_bits);
+    out.saturations += v != r;
+    out.x[i] = int32_t(v);
   }
 }
 
 TmeOutput Tme::eval(const int32_t* feature, const std::vector<int32_t>& dir_code) {
+  direction_input(dir_code, eval_dir_);
+  const TmeDirection* d = &eval_dir_;
+  TmeOutput out;
+  eval_batch(1, feature, &d, &out);
+  return out;
+}
+
+void Tme::eval_batch(size_t samples, const int32_t* features, const TmeDirection* const* dirs, TmeOutput* out) {
   if (current_ < 0) throw std::logic_error("TME eval: no MLP loaded");
+  if (samples == 0) return;
+  const size_t need = samples * size_t(kMaxLayerWidth);
+  if (act_a_.size() < need) {
+    act_a_.resize(need);
+    act_b_.resize(need);
+    sum_main_.resize(need);
+    sum_dir_.resize(need);
+  }
+  switch (n_.rounding) {
+    case fx::Rounding::Floor:
+      return eval_batch_as<fx::Rounding::Floor>(samples, features, dirs, out);
+    case fx::Rounding::HalfUp:
+      return eval_batch_as<fx::Rounding::HalfUp>(samples, features, dirs, out);
+    case fx::Rounding::HalfEven:
+      return eval_batch_as<fx::Rounding::HalfEven>(samples, features, dirs, out);
+  }
+}
+
+// One layer for every sample of a batch: the products through the GEMM kernel
+// (exact in int32, see tme_kernel.h), the saturating accumulation, the
+// direction partial sum and the requantization per neuron as the TME does them.
+template <fx::Rounding M>
+void Tme::layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32_t* y, bool hidden, int out_bits,
+                      int split, const fx::Requant* split_q) {
+  const int A = n_.accumulator_bits;
+  const size_t W = kMaxLayerWidth;
+  const int main_in = split >= 0 ? split : L.in;
+  tme_dot_columns(L.wt.data(), size_t(L.out_pad), 0, size_t(main_in), x, W, samples, sum_main_.data(), W);
+  if (split >= 0)
+    tme_dot_columns(L.wt.data(), size_t(L.out_pad), size_t(split), size_t(L.in), x, W, samples, sum_dir_.data(), W);
+  uint64_t saturations = L.bias_saturations * samples;
+  if (hidden && split < 0 && L.requant_vector && L.requant_rounding == M) {
+    // Every sum is exact and every requantization fits 64 bits: the same
+    // values as the loop below, several neurons at a time.
+    saturations += tme_requant_relu(sum_main_.data(), W, samples, L.bias32.data(), L.mult32.data(), L.half64.data(),
+                                    L.shift64.data(), size_t(L.out_pad), out_bits, y, W);
+    counters_.macs += uint64_t(L.in) * uint64_t(L.out) * samples;
+    counters_.saturations += saturations;
+    return;
+  }
+  for (size_t s = 0; s < samples; ++s) {
+    const int32_t* xs = x + s * W;
+    const int32_t* main_sum = &sum_main_[s * W];
+    const int32_t* dir_sum = &sum_dir_[s * W];
+    int32_t* ys = y + s * W;
+    for (int j = 0; j < L.out; ++j) {
+      int64_t acc = L.bias_sat[size_t(j)];
+      if (L.sum_exact[size_t(j)]) {
+        // No partial sum can reach the accumulator's limits: saturating after
+        // each addition would change nothing.
+        acc += main_sum[j];
+      } else {
+        const int8_t* w = &L.w[size_t(j) * size_t(L.in)];
+        for (int i = 0; i < main_in; ++i) {
+          const int64_t sum = acc + int64_t(w[i]) * xs[i];
+          acc = fx::saturate(sum, A);
+          saturations += acc != sum;
+        }
+      }
+      if (split >= 0) {
+        // The direction products in an accumulator of their own, then to
+        // accumulator units.
+        const int64_t part = dir_sum[j];
+        const int64_t p = fx::saturate(part, A);
+        saturations += p != part;
+        const int64_t sum = acc + fx::requantize<M>(p, *split_q);
+        acc = fx::saturate(sum, A);
+        saturations += acc != sum;
+      }
+      const int64_t v = hidden ? std::max<int64_t>(acc, 0) : acc;
+      const int64_t r = fx::requantize<M>(v, L.requant[size_t(j)]);
+      const int64_t o = fx::saturate(r, out_bits);
+      ys[j] = int32_t(o);
+      saturations += o != r;
+    }
+  }
+  counters_.macs += uint64_t(L.in) * uint64_t(L.out) * samples;
+  counters_.saturations += saturations;
+}
+
+template <fx::Rounding M>
+void Tme::eval_batch_as(size_t samples, const int32_t* features, const TmeDirection* const* dirs, TmeOutput* out) {
   const TmeMlp& m = mlps_[size_t(current_)];
   const int act = n_.activation_bits, outb = n_.mlp_output_bits;
-  int32_t a[kMaxLayerWidth], b[kMaxLayerWidth];
+  const size_t W = kMaxLayerWidth;
+  uint64_t saturations = 0;
   auto in_stage = [&](int64_t v, const fx::Requant& q) {
-    const int64_t r = fx::requantize(v, q, n_.rounding);
+    const int64_t r = fx::requantize<M>(v, q);
     const int64_t s = fx::saturate(r, act);
-    counters_.saturations += s != r;
+    saturations += s != r;
     return int32_t(s);
   };
   const int F = model_.feature_channels;
-  for (int c = 0; c < F; ++c) a[c] = in_stage(feature[c], m.feature_in[size_t(c)]);
-  int32_t* x = a;
-  int32_t* y = b;
+  int32_t* x = act_a_.data();
+  int32_t* y = act_b_.data();
+  for (size_t s = 0; s < samples; ++s)
+    for (int c = 0; c < F; ++c)
+      x[s * W + size_t(c)] = in_stage(features[s * size_t(F) + size_t(c)], m.feature_in[size_t(c)]);
   for (size_t l = 0; l < m.density.size(); ++l) {
     const bool hidden = l + 1 < m.density.size();
-    layer(m.density[l], x, y, hidden, hidden ? act : outb);
+    layer_batch<M>(m.density[l], samples, x, y, hidden, hidden ? act : outb, -1, nullptr);
     std::swap(x, y);
   }
-  TmeOutput out;
-  out.raw_density = x[0];
-  out.alpha = alpha_lut_(out.raw_density);
   // Colour net input: density outputs, then the direction encoding.
   const int G = m.density.back().out;
-  for (int g = 0; g < G; ++g) y[g] = in_stage(x[g], m.geo_in);
-  for (size_t i = 0; i < dir_code.size(); ++i) y[size_t(G) + i] = in_stage(dir_code[i], dir_code_);
+  for (size_t s = 0; s < samples; ++s) {
+    out[s].raw_density = x[s * W];
+    out[s].alpha = alpha_lut_(out[s].raw_density);
+    for (int g = 0; g < G; ++g) y[s * W + size_t(g)] = in_stage(x[s * W + size_t(g)], m.geo_in);
+    const TmeDirection& d = *dirs[s];
+    std::copy(d.x.begin(), d.x.end(), y + s * W + size_t(G));
+    saturations += d.saturations;
+  }
   std::swap(x, y);
   for (size_t l = 0; l < m.color.size(); ++l) {
     const bool hidden = l + 1 < m.color.size();
-    layer(m.color[l], x, y, hidden, hidden ? act : outb, l == 0 ? G : -1, &m.dir_in);
+    layer_batch<M>(m.color[l], samples, x, y, hidden, hidden ? act : outb, l == 0 ? G : -1, &m.dir_in);
     std::swap(x, y);
   }
-  for (int c = 0; c < 3; ++c) out.rgb[size_t(c)] = sigmoid_lut_(x[c]);
-  ++counters_.samples;
-  return out;
+  for (size_t s = 0; s < samples; ++s)
+    for (int c = 0; c < 3; ++c) out[s].rgb[size_t(c)] = sigmoid_lut_(x[s * W + size_t(c)]);
+  counters_.samples += samples;
+  counters_.saturations += saturations;
 }
 
 }  // namespace edrnr::chip

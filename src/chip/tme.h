@@ -31,6 +31,7 @@
 
 #include "chip/activation_lut.h"
 #include "chip/numerics.h"
+#include "chip/tme_kernel.h"
 #include "core/vec.h"
 #include "model/scene_model.h"
 
@@ -42,6 +43,23 @@ struct TmeLayer {
   std::vector<int64_t> bias;            // out, INT32 in accumulator units
   std::vector<fx::Requant> requant;     // out: to the next layer's input, or to the raw output format
   std::vector<int64_t> abs_weight_sum;  // out: sum of |w| of each row (bounds the accumulator)
+  // The same layer arranged for the batched GEMM (tme_kernel.h):
+  int out_pad = 0;                 // out rounded up to a multiple of kTmeLanePad
+  std::vector<int32_t> wt;         // in x out_pad: the weights transposed, padding zero
+  std::vector<int64_t> bias_sat;   // out: the bias saturated to the accumulator
+  std::vector<uint8_t> sum_exact;  // out: 1 if no partial sum can reach the accumulator's limits
+  uint64_t bias_saturations = 0;   // neurons whose bias_sat differs from bias (counted per evaluation)
+  // A hidden layer whose neurons are all sum_exact, with multipliers below
+  // 2^31 and shifts in [0, 62] (the exact 64-bit requantization), with an
+  // accumulator of at most 32 bits and floor or half-up rounding: its
+  // requantization runs as tme_requant_relu on these out_pad arrays
+  // (padding zero).
+  bool requant_vector = false;
+  fx::Rounding requant_rounding = fx::Rounding::Floor;  // the rounding half64 was made for
+  std::vector<int32_t> bias32;
+  std::vector<uint32_t> mult32;
+  std::vector<uint64_t> shift64;
+  std::vector<uint64_t> half64;  // 2^shift / 2 for half-up rounding, 0 for floor
 };
 
 struct TmeMlp {
@@ -75,6 +93,13 @@ struct TmeCounters {
   uint64_t saturations = 0;  // accumulator or output values clipped
 };
 
+// A ray's direction as the colour net's INT8 inputs: computed once per ray
+// (Tme::direction_input) and used by each of its samples.
+struct TmeDirection {
+  std::vector<int32_t> x;    // dir_dims activation codes
+  uint64_t saturations = 0;  // codes clipped on the way (counted again per sample)
+};
+
 class Tme {
  public:
   // delta: sample spacing in scene units. Throws Error if the model has no
@@ -86,6 +111,13 @@ class Tme {
   // Evaluates the current MLP. feature: F interpolated features (CFIU
   // format); dir_code: the ray's direction encoding (encode_direction).
   TmeOutput eval(const int32_t* feature, const std::vector<int32_t>& dir_code);
+  // The direction inputs of a ray (the requantization eval() does per sample),
+  // into `out` (its storage reused).
+  void direction_input(const std::vector<int32_t>& dir_code, TmeDirection& out) const;
+  // Evaluates the current MLP on `samples` samples at once, as that many
+  // eval() calls would (same outputs, same counters): features holds F values
+  // per sample, dirs[s] the direction inputs of sample s's ray.
+  void eval_batch(size_t samples, const int32_t* features, const TmeDirection* const* dirs, TmeOutput* out);
 
   // Direction encoding [d, sin(2^k d), cos(2^k d) for k < L] as signed
   // direction_code_bits codes with direction_code_frac_bits fraction bits.
@@ -97,13 +129,20 @@ class Tme {
   const TmeCounters& counters() const { return counters_; }
 
  private:
+  template <fx::Rounding M>
+  void eval_batch_as(size_t samples, const int32_t* features, const TmeDirection* const* dirs, TmeOutput* out);
+  // One layer for every sample (kMaxLayerWidth values per sample in x and y).
   // split >= 0: inputs from `split` on are direction inputs, summed apart and
   // brought to accumulator units by split_q.
-  void layer(const TmeLayer& L, const int32_t* x, int32_t* y, bool hidden, int out_bits, int split = -1,
-             const fx::Requant* split_q = nullptr);
+  template <fx::Rounding M>
+  void layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32_t* y, bool hidden, int out_bits,
+                   int split, const fx::Requant* split_q);
 
   const SceneModel& model_;
   ChipNumerics n_;
+  // Scratch of eval_batch: activations and sums, kMaxLayerWidth per sample.
+  std::vector<int32_t> act_a_, act_b_, sum_main_, sum_dir_;
+  TmeDirection eval_dir_;  // eval()'s direction inputs
   std::vector<TmeMlp> mlps_;
   ActivationLut alpha_lut_, sigmoid_lut_;
   fx::Requant dir_code_;  // direction code -> INT8 direction input (step 1 / (2^(activation_bits-1) - 1))

@@ -172,4 +172,26 @@ inline double FloatFormat::round(double x) const {
   return std::copysign(double(r) * min_subnormal_, x);
 }
 
+inline double FloatFormat::fma(double a, double b, double c) const {
+  // a * b is exact in binary64 (at most 2p <= 50 significant bits, exponents
+  // far from binary64's limits). The sum is rounded to nearest; TwoSum gives
+  // its exact error, and a nonzero error turns the result into the
+  // round-to-odd sum (the neighbour toward the exact value when the rounded
+  // sum has an even last bit). Rounding a round-to-odd value with >= p + 2 bits
+  // to p bits equals rounding the exact value.
+  const double prod = a * b;
+  double s = prod + c;
+  if (!std::isfinite(s)) return round(s);
+  const double bv = s - prod;
+  const double err = (prod - (s - bv)) + (c - bv);
+  uint64_t bits = std::bit_cast<uint64_t>(s);
+  if (err != 0.0 && (bits & 1) == 0) {
+    // s != 0 here (a zero sum is exact). Step the magnitude toward the error.
+    const bool away_from_zero = (err > 0.0) == (s > 0.0);
+    bits = away_from_zero ? bits + 1 : bits - 1;
+    s = std::bit_cast<double>(bits);
+  }
+  return round(s);
+}
+
 }  // namespace edrnr

@@ -1,5 +1,7 @@
 #include "core/fixed_point.h"
 
+#include <bit>
+
 #include "core/error.h"
 
 namespace edrnr::fx {
@@ -33,7 +35,9 @@ int64_t round_scaled(double v, int frac_bits, Rounding mode) {
   if (v != v) return 0;
   if (frac_bits > 1000) frac_bits = 1000;
   if (frac_bits < -1000) frac_bits = -1000;
-  const double s = std::ldexp(v, frac_bits);  // exact unless it leaves the double range
+  // v * 2^frac_bits, as std::ldexp gives it (both are the correctly rounded
+  // product; 2^frac_bits is a normal double for |frac_bits| <= 1000).
+  const double s = v * std::bit_cast<double>(uint64_t(1023 + frac_bits) << 52);
   if (s == 0.0) {
     // A negative v whose scaled value underflowed lies in (-1, 0).
     return (v < 0.0 && mode == Rounding::Floor) ? -1 : 0;

@@ -110,6 +110,11 @@ constexpr int64_t shift_right_round(int64_t x, int shift, Rounding mode) {
 // round(a * b / 2^shift), the product formed exactly in 128 bits, the result
 // saturated to int64_t. shift is clamped to [0, 127].
 constexpr int64_t multiply_shift(int64_t a, int64_t b, int shift, Rounding mode) {
+  if (a == int32_t(a) && b == int32_t(b)) {
+    // |a * b| <= 2^62: the product is exact in 64 bits, and so is its
+    // rounding (shifts past 63 give what the exact quotient rounds to).
+    return shift_right_round(a * b, shift < 0 ? 0 : shift, mode);
+  }
   using I = __int128;
   using U = unsigned __int128;
   const I p = I(a) * I(b);
@@ -134,6 +139,19 @@ struct Requant {
 // 128-bit product), saturated to int64_t.
 constexpr int64_t requantize(int64_t x, Requant q, Rounding mode) {
   return multiply_shift(x, q.multiplier, q.shift, mode);
+}
+// The same with the rounding fixed at compile time, for inner loops: with
+// |x| and the multiplier below 2^31 (an accumulator of at most 32 bits, a
+// multiplier of at most 31) the product and its rounding stay in 64 bits.
+template <Rounding M>
+constexpr int64_t requantize(int64_t x, Requant q) {
+  if (x == int32_t(x) && q.multiplier == int32_t(q.multiplier) && q.shift >= 0 && q.shift <= 62) {
+    const int64_t p = x * q.multiplier;  // |p| <= 2^62
+    if constexpr (M == Rounding::Floor) return p >> q.shift;
+    // floor((p + 2^(s-1)) / 2^s): ties up; no overflow with |p| <= 2^62.
+    if constexpr (M == Rounding::HalfUp) return (p + ((int64_t(1) << q.shift) >> 1)) >> q.shift;
+  }
+  return multiply_shift(x, q.multiplier, q.shift, M);
 }
 
 // The (multiplier, shift) pair for a real scale > 0, with multiplier_bits in

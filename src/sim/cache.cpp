@@ -138,11 +138,12 @@ void Cache::touch(uint64_t set, uint64_t way) {
   }
 }
 
-uint64_t Cache::plru_victim(uint64_t set, const std::vector<bool>& eligible) const {
+uint64_t Cache::plru_victim(uint64_t set) {
   if (ways_ == 1) return 0;
   // Eligible ways per subtree, so the walk can avoid halves that are all reserved.
-  std::vector<uint64_t> count(2 * ways_, 0);
-  for (uint64_t w = 0; w < ways_; ++w) count[ways_ + w] = eligible[w] ? 1 : 0;
+  std::vector<uint64_t>& count = plru_count_;
+  count.assign(2 * ways_, 0);
+  for (uint64_t w = 0; w < ways_; ++w) count[ways_ + w] = eligible_[w] ? 1 : 0;
   for (uint64_t n = ways_ - 1; n >= 1; --n) count[n] = count[2 * n] + count[2 * n + 1];
   const uint8_t* bits = &plru_bits_[set * (ways_ - 1)];
   uint64_t node = 1;
@@ -157,38 +158,43 @@ uint64_t Cache::plru_victim(uint64_t set, const std::vector<bool>& eligible) con
 uint64_t Cache::choose_victim(uint64_t set) {
   for (uint64_t w = 0; w < ways_; ++w)
     if (!way_ptr(set, w)->valid) return w;
-  std::vector<bool> eligible(ways_);
-  uint64_t n_eligible = 0;
-  for (uint64_t w = 0; w < ways_; ++w) {
-    eligible[w] = !reserved_line(way_ptr(set, w)->line);
-    n_eligible += eligible[w];
-  }
+  // Eligible ways: those holding no reserved line (no lookups when nothing is reserved).
+  const bool any_reserved = !reserved_.empty();
+  eligible_.assign(ways_, 1);
+  uint64_t n_eligible = ways_;
+  if (any_reserved)
+    for (uint64_t w = 0; w < ways_; ++w)
+      if (reserved_line(way_ptr(set, w)->line)) {
+        eligible_[w] = 0;
+        --n_eligible;
+      }
   if (n_eligible == 0) return ways_;
   uint64_t best = ways_;
   switch (config_.replacement) {
     case Replacement::Lru:
-    case Replacement::Fifo:
+    case Replacement::Fifo: {
+      // The eligible way with the smallest stamp (stamps are unique).
+      const bool lru = config_.replacement == Replacement::Lru;
+      uint64_t best_key = 0;
       for (uint64_t w = 0; w < ways_; ++w) {
-        if (!eligible[w]) continue;
+        if (!eligible_[w]) continue;
         const Way* a = way_ptr(set, w);
-        if (best == ways_) {
+        const uint64_t key = lru ? a->last_use : a->filled;
+        if (best == ways_ || key < best_key) {
           best = w;
-          continue;
+          best_key = key;
         }
-        const Way* b = way_ptr(set, best);
-        uint64_t ka = config_.replacement == Replacement::Lru ? a->last_use : a->filled;
-        uint64_t kb = config_.replacement == Replacement::Lru ? b->last_use : b->filled;
-        if (ka < kb) best = w;
       }
       return best;
+    }
     case Replacement::Random: {
       uint64_t pick = next_random() % n_eligible;
       for (uint64_t w = 0; w < ways_; ++w)
-        if (eligible[w] && pick-- == 0) return w;
+        if (eligible_[w] && pick-- == 0) return w;
       return ways_;
     }
     case Replacement::TreePlru:
-      return plru_victim(set, eligible);
+      return plru_victim(set);
   }
   return best;
 }

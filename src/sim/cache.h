@@ -209,7 +209,7 @@ class Cache {
   bool reserved_line(uint64_t line) const;
   // The way to fill in `set`, or ways_ if every way holds a reserved line.
   uint64_t choose_victim(uint64_t set);
-  uint64_t plru_victim(uint64_t set, const std::vector<bool>& eligible) const;
+  uint64_t plru_victim(uint64_t set);  // among the ways eligible_ marks
   void record(uint64_t cycle, bool hit);
   uint64_t next_random();
 
@@ -221,6 +221,8 @@ class Cache {
   std::vector<uint8_t> plru_bits_;                   // sets_ x (ways_ - 1), heap order per set
   std::unordered_map<uint64_t, uint64_t> where_;     // resident line -> set * ways_ + way
   std::unordered_map<uint64_t, uint32_t> reserved_;  // line -> reservation count (> 0)
+  std::vector<uint8_t> eligible_;                    // choose_victim's scratch: per way, 1 if it may be replaced
+  std::vector<uint64_t> plru_count_;                 // plru_victim's scratch: eligible ways per tree node
   uint64_t stamp_ = 0;
   uint64_t random_state_ = 0;
   Mshr mshr_;

@@ -85,7 +85,6 @@ DramSystem::DramSystem(const DramConfig& config, StatsRegistry& stats, const std
       rank.refresh_due = uint64_t{config_.tREFI} * (r + 1) / config_.ranks;
     }
   }
-  bank_has_hit_.assign(size_t{config_.ranks} * config_.banks, 0);
   channel_count_.assign(config_.channels, 0);
 
   burst_shift_ = log2_exact(config_.burst_bytes());
@@ -157,7 +156,12 @@ bool DramSystem::enqueue(DramOp op, uint64_t address, uint32_t bytes, uint64_t i
     burst.request = slot;
     burst.op = op;
     burst.loc = locate(b << burst_shift_);
-    channels_[burst.loc.channel].queue.push_back(burst);
+    Channel& ch = channels_[burst.loc.channel];
+    Bank& bank = ch.ranks[burst.loc.rank].banks[burst.loc.bank];
+    ++bank.queued;
+    if (bank.open_row == burst.loc.row) ++(op == DramOp::kRead ? bank.hit_reads : bank.hit_writes);
+    ch.queue.push_back(burst);
+    ch.wake = 0;
   }
   return true;
 }
@@ -173,7 +177,8 @@ uint64_t DramSystem::allocate_request() {
 }
 
 void DramSystem::tick() {
-  for (uint32_t ch = 0; ch < config_.channels; ++ch) schedule(ch);
+  for (uint32_t ch = 0; ch < config_.channels; ++ch)
+    if (cycle_ >= channels_[ch].wake) schedule(ch);
   // Background current for this cycle, from the state after this cycle's commands.
   for (const Channel& ch : channels_) {
     for (const Rank& rank : ch.ranks) {
@@ -279,29 +284,33 @@ bool DramSystem::try_refresh(uint32_t ch_index) {
 }
 
 void DramSystem::schedule(uint32_t ch_index) {
-  if (config_.refresh && try_refresh(ch_index)) return;
   Channel& ch = channels_[ch_index];
-  if (ch.queue.empty()) return;
+  if (cycle_ < ch.wake) return;  // nothing can have become ready
+  issue_one(ch_index);
+  ch.wake = channel_wake(ch_index);
+}
+
+bool DramSystem::issue_one(uint32_t ch_index) {
+  if (config_.refresh && try_refresh(ch_index)) return true;
+  Channel& ch = channels_[ch_index];
+  if (ch.queue.empty()) return false;
 
   // First ready: the oldest burst whose row is open and whose RD/WR may issue now.
   for (auto it = ch.queue.begin(); it != ch.queue.end(); ++it) {
     const Rank& rank = ch.ranks[it->loc.rank];
     if (rank.refresh_pending) continue;
-    if (rank.banks[it->loc.bank].open_row == it->loc.row && cas_ready(ch, *it)) {
+    Bank& bank = ch.ranks[it->loc.rank].banks[it->loc.bank];
+    if (bank.open_row == it->loc.row && cas_ready(ch, *it)) {
       issue_cas(ch_index, *it);
+      --bank.queued;
+      --(it->op == DramOp::kRead ? bank.hit_reads : bank.hit_writes);
       ch.queue.erase(it);
-      return;
+      return true;
     }
   }
 
   // First come, first served: the oldest burst whose ACT or PRE may issue now.
   // An open row that a queued burst still hits is not closed.
-  std::fill(bank_has_hit_.begin(), bank_has_hit_.end(), 0);
-  for (const Burst& b : ch.queue) {
-    if (ch.ranks[b.loc.rank].banks[b.loc.bank].open_row == b.loc.row) {
-      bank_has_hit_[size_t{b.loc.rank} * config_.banks + b.loc.bank] = 1;
-    }
-  }
   for (Burst& b : ch.queue) {
     Rank& rank = ch.ranks[b.loc.rank];
     if (rank.refresh_pending) continue;
@@ -309,16 +318,52 @@ void DramSystem::schedule(uint32_t ch_index) {
     if (bank.open_row == kClosed) {
       if (act_ready(rank, bank)) {
         issue_activate(ch_index, b);
-        return;
+        return true;
       }
     } else if (bank.open_row != b.loc.row) {
-      if (!bank_has_hit_[size_t{b.loc.rank} * config_.banks + b.loc.bank] && cycle_ >= bank.pre_ready) {
+      if (!bank.has_hit() && cycle_ >= bank.pre_ready) {
         b.caused_precharge = true;
         issue_precharge(ch_index, b.loc.rank, b.loc.bank);
-        return;
+        return true;
       }
     }
   }
+  return false;
+}
+
+uint64_t DramSystem::channel_wake(uint32_t ch_index) const {
+  // Every condition issue_one() tests compares cycle_ with a time that only a
+  // command or an arrival in the channel can change, and at most one command
+  // issues per cycle. The queued bursts of one bank share their conditions
+  // but for the operation of a row hit.
+  const Channel& ch = channels_[ch_index];
+  uint64_t wake = UINT64_MAX;
+  for (const Rank& rank : ch.ranks) {
+    if (config_.refresh) {
+      if (!rank.refresh_pending) {
+        wake = std::min(wake, rank.refresh_due);
+      } else if (rank.open_banks == 0) {
+        wake = std::min(wake, std::max(rank.ref_ready, rank.refresh_end));
+      } else {
+        for (const Bank& bank : rank.banks)
+          if (bank.open_row != kClosed) wake = std::min(wake, bank.pre_ready);
+      }
+    }
+    if (rank.refresh_pending) continue;  // its bursts wait for the refresh, counted above
+    for (const Bank& bank : rank.banks) {
+      if (bank.queued == 0) continue;
+      if (bank.open_row == kClosed) {
+        uint64_t t = std::max(bank.act_ready, rank.act_ready);
+        if (rank.act_count >= 4) t = std::max(t, rank.act_history[rank.act_count % 4] + config_.tFAW);
+        wake = std::min(wake, t);
+        continue;
+      }
+      if (bank.hit_reads > 0) wake = std::min(wake, std::max(bank.cas_ready, rank.rd_ready));
+      if (bank.hit_writes > 0) wake = std::min(wake, std::max(bank.cas_ready, rank.wr_ready));
+      if (!bank.has_hit()) wake = std::min(wake, bank.pre_ready);  // bursts to another row
+    }
+  }
+  return std::max(wake, cycle_ + 1);
 }
 
 void DramSystem::issue_activate(uint32_t ch_index, Burst& b) {
@@ -327,6 +372,9 @@ void DramSystem::issue_activate(uint32_t ch_index, Burst& b) {
   Bank& bank = rank.banks[b.loc.bank];
   bank.open_row = b.loc.row;
   ++rank.open_banks;
+  for (const Burst& q : channels_[ch_index].queue)
+    if (q.loc.rank == b.loc.rank && q.loc.bank == b.loc.bank && q.loc.row == b.loc.row)
+      ++(q.op == DramOp::kRead ? bank.hit_reads : bank.hit_writes);
   bank.cas_ready = t + config_.tRCD;
   bank.pre_ready = std::max(bank.pre_ready, t + config_.tRAS);
   bank.act_ready = t + config_.tRC;
@@ -344,6 +392,7 @@ void DramSystem::issue_precharge(uint32_t ch_index, uint32_t rank_index, uint32_
   Bank& bank = rank.banks[bank_index];
   DramLocation loc{ch_index, rank_index, bank_index, bank.open_row, 0};
   bank.open_row = kClosed;
+  bank.hit_reads = bank.hit_writes = 0;
   --rank.open_banks;
   bank.act_ready = std::max(bank.act_ready, t + config_.tRP);
   rank.ref_ready = std::max(rank.ref_ready, t + config_.tRP);

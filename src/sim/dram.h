@@ -123,6 +123,10 @@ class DramSystem {
     uint64_t act_ready = 0;  // earliest ACT (tRC, tRP, tRFC)
     uint64_t pre_ready = 0;  // earliest PRE (tRAS, tRTP, write recovery)
     uint64_t cas_ready = 0;  // earliest RD/WR (tRCD)
+    // Bursts of this bank in the channel queue, and those of them that hit
+    // the open row, by operation (kept as bursts arrive and commands issue).
+    uint32_t queued = 0, hit_reads = 0, hit_writes = 0;
+    bool has_hit() const { return hit_reads + hit_writes > 0; }
   };
   struct Rank {
     std::vector<Bank> banks;
@@ -147,6 +151,9 @@ class DramSystem {
   struct Channel {
     std::vector<Rank> ranks;
     std::deque<Burst> queue;  // arrival order
+    // schedule() issues nothing before this cycle: it rescans the queue only
+    // then, or when a burst arrives or a command issues in the channel.
+    uint64_t wake = 0;
   };
   struct Request {
     DramCompletion info;
@@ -162,7 +169,14 @@ class DramSystem {
     }
   };
 
+  // Issues at most one command in the channel (refresh, then FR-FCFS), unless
+  // nothing can be ready before the channel's wake cycle.
   void schedule(uint32_t channel_index);
+  bool issue_one(uint32_t channel_index);  // true if a command issued
+  // The earliest cycle after cycle_ at which issue_one() could issue a
+  // command in the channel, given that no burst arrives there before (every
+  // readiness time it compares with is fixed until a command issues).
+  uint64_t channel_wake(uint32_t channel_index) const;
   bool try_refresh(uint32_t channel_index);
   bool cas_ready(const Channel& ch, const Burst& b) const;
   bool act_ready(const Rank& rank, const Bank& bank) const;
@@ -186,7 +200,6 @@ class DramSystem {
   std::priority_queue<Pending, std::vector<Pending>, std::greater<Pending>> pending_;
   uint64_t pending_sequence_ = 0;
   std::deque<DramCompletion> completions_;
-  std::vector<uint8_t> bank_has_hit_;            // scratch for schedule()
   mutable std::vector<uint32_t> channel_count_;  // scratch for can_accept() and enqueue()
 
   uint64_t cycle_ = 0;

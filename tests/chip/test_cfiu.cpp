@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <array>
+
 #include "chip/cfiu.h"
 #include "chip/oo_si.h"
 #include "core/error.h"
@@ -86,6 +88,49 @@ TEST(Cfiu, RoundsOnceAndSaturates) {
   narrow.cache().fill(0);
   narrow.interpolate(0, s, out);
   EXPECT_EQ(out[0], 127);
+}
+
+TEST(Cfiu, OddChannelCountsReadCodesAcrossBytes) {
+  // 3 channels: a vertex's codes start on either nibble of a byte. Channel 0
+  // code = i, channel 1 = j, channel 2 = k + 1 (zero point 1) at vertex
+  // (i, j, k); trilinear interpolation reproduces each linear function.
+  SceneModel m;
+  m.micro_res = 32;
+  m.feature_channels = 3;
+  m.init_grids();
+  m.occupancy[int(Tier::Micro)].set(0, 0, 0);
+  m.rebuild_upper_tiers();
+  m.block_fine_index = {0};
+  m.features_q4.assign((kBlockVerts * 3 + 1) / 2, 0);
+  auto put = [&](size_t at, int code) { m.features_q4[at >> 1] |= uint8_t(code << ((at & 1) * 4)); };
+  for (int k = 0; k < 5; ++k)
+    for (int j = 0; j < 5; ++j)
+      for (int i = 0; i < 5; ++i) {
+        const size_t v = size_t(block_vertex(i, j, k));
+        put(3 * v, i);
+        put(3 * v + 1, j);
+        put(3 * v + 2, k + 1);
+      }
+  m.feature_quant.scale = {1.f, 1.f, 1.f};
+  m.feature_quant.zero_point = {0, 0, 1};
+  m.finalize();
+  Cfiu cfiu(m, ChipNumerics{}, {.lines = 8, .mshr_entries = 2, .mapping = BankMapping::Balanced});
+  cfiu.cache().request(0);
+  cfiu.cache().fill(0);
+  const struct {
+    Vec3i local;
+    std::array<int, 3> frac;  // 8 bits
+  } cases[] = {
+      {{1, 2, 0}, {64, 128, 192}}, {{0, 3, 1}, {255, 1, 7}}, {{3, 3, 3}, {0, 0, 0}}, {{2, 1, 3}, {17, 200, 99}}};
+  for (const auto& c : cases) {
+    SampleCoord s;
+    s.local = c.local;
+    s.frac = {uint32_t(c.frac[0]), uint32_t(c.frac[1]), uint32_t(c.frac[2])};
+    int32_t out[3];
+    cfiu.interpolate(0, s, out);
+    // In steps of 1/256 code: the position along each axis, exactly.
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(out[a], 256 * c.local[a] + c.frac[size_t(a)]) << "axis " << a;
+  }
 }
 
 TEST(Cfiu, NeedsQuantizedFeatures) {

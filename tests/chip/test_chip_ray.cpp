@@ -33,6 +33,21 @@ TEST(RayMath, AxisAlignedRayByHand) {
   EXPECT_TRUE(m.box_interval(r, {10, 11, 0}, {20, 20, 64}).empty());
 }
 
+TEST(RayMath, CandidateDistancesMatchTheFormatArithmeticBeyondTheTable) {
+  // t_k = round(round(k + 0.5) * step), computed here with the format alone,
+  // for k inside the table RayMath fills (16 Rm / step + 2 entries), across
+  // its end and far past it.
+  for (double step : {1.0, 0.37, 2.5}) {
+    RayMath m(kTraversal, step, 64);
+    const double s = kTraversal.round(step);
+    auto expected = [&](int64_t k) { return kTraversal.mul(kTraversal.round(double(k) + 0.5), s); };
+    const int64_t table_end = int64_t(16.0 * 64 / s + 2.0);
+    for (int64_t k = 0; k < table_end + 64; ++k) ASSERT_EQ(m.t_of(k), expected(k)) << "step " << step << " k " << k;
+    for (int64_t k : {int64_t(1) << 20, kMaxCandidate - 1, kMaxCandidate})
+      EXPECT_EQ(m.t_of(k), expected(k)) << "step " << step << " k " << k;
+  }
+}
+
 TEST(RayMath, HalfStepsAndNegativeDirection) {
   // d = -y, step 0.5: t_k = 0.5 k + 0.25, p_k.y = 30 - 0.5 k - 0.25.
   RayMath m(kTraversal, 0.5, 64);

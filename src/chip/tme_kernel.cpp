@@ -1,0 +1,108 @@
+// Highway kernels of the TME, compiled once per SIMD target
+// (hwy/foreach_target.h) and picked at run time (HWY_DYNAMIC_DISPATCH).
+#include "chip/tme_kernel.h"
+
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "chip/tme_kernel.cpp"
+#include <hwy/foreach_target.h>  // before highway.h
+#include <hwy/highway.h>
+
+HWY_BEFORE_NAMESPACE();
+namespace edrnr::chip {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+void DotColumns(const int32_t* HWY_RESTRICT wt, size_t out_pad, size_t i_begin, size_t i_end,
+                const int32_t* HWY_RESTRICT x, size_t x_stride, size_t samples, int32_t* HWY_RESTRICT y,
+                size_t y_stride) {
+  const hn::ScalableTag<int32_t> d;
+  const size_t n = hn::Lanes(d);
+  for (size_t s = 0; s < samples; ++s) {
+    const int32_t* xs = x + s * x_stride;
+    int32_t* ys = y + s * y_stride;
+    for (size_t j = 0; j < out_pad; j += n) {
+      auto acc0 = hn::Zero(d);
+      auto acc1 = hn::Zero(d);
+      size_t i = i_begin;
+      for (; i + 2 <= i_end; i += 2) {
+        acc0 = hn::Add(acc0, hn::Mul(hn::LoadU(d, wt + i * out_pad + j), hn::Set(d, xs[i])));
+        acc1 = hn::Add(acc1, hn::Mul(hn::LoadU(d, wt + (i + 1) * out_pad + j), hn::Set(d, xs[i + 1])));
+      }
+      if (i < i_end) acc0 = hn::Add(acc0, hn::Mul(hn::LoadU(d, wt + i * out_pad + j), hn::Set(d, xs[i])));
+      hn::StoreU(hn::Add(acc0, acc1), d, ys + j);
+    }
+  }
+}
+
+// tme_requant_relu (tme_kernel.h); the scalar target computes it lane by lane.
+uint64_t RequantRelu(const int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t samples,
+                     const int32_t* HWY_RESTRICT bias, const uint32_t* HWY_RESTRICT mult,
+                     const uint64_t* HWY_RESTRICT half, const uint64_t* HWY_RESTRICT shift, size_t out_pad,
+                     int out_bits, int32_t* HWY_RESTRICT y, size_t y_stride) {
+#if HWY_TARGET == HWY_SCALAR
+  const uint64_t max_value = (uint64_t(1) << (out_bits - 1)) - 1;
+  uint64_t saturations = 0;
+  for (size_t s = 0; s < samples; ++s)
+    for (size_t j = 0; j < out_pad; ++j) {
+      const int64_t v = int64_t(sum[s * sum_stride + j]) + bias[j];
+      const uint64_t r = (uint64_t(v > 0 ? v : 0) * mult[j] + half[j]) >> shift[j];
+      saturations += r > max_value;
+      y[s * y_stride + j] = int32_t(r > max_value ? max_value : r);
+    }
+  return saturations;
+#else
+  const hn::ScalableTag<uint64_t> d64;
+  const hn::Rebind<int32_t, decltype(d64)> d32h;
+  const hn::Rebind<uint32_t, decltype(d64)> du32h;
+  const hn::Repartition<uint32_t, decltype(d64)> du32;
+  const size_t n = hn::Lanes(d64);
+  const auto max_out = hn::Set(d64, (uint64_t(1) << (out_bits - 1)) - 1);
+  uint64_t saturations = 0;
+  HWY_ALIGN uint64_t lanes[HWY_MAX_BYTES / sizeof(uint64_t)];
+  for (size_t s = 0; s < samples; ++s) {
+    const int32_t* ss = sum + s * sum_stride;
+    int32_t* ys = y + s * y_stride;
+    for (size_t j = 0; j < out_pad; j += n) {
+      const auto v32 = hn::Max(hn::Add(hn::LoadU(d32h, ss + j), hn::LoadU(d32h, bias + j)), hn::Zero(d32h));
+      const auto v64 = hn::PromoteTo(d64, hn::BitCast(du32h, v32));
+      const auto m64 = hn::PromoteTo(d64, hn::LoadU(du32h, mult + j));
+      const auto p = hn::MulEven(hn::BitCast(du32, v64), hn::BitCast(du32, m64));
+      const auto r = hn::Add(p, hn::LoadU(d64, half + j)) >> hn::LoadU(d64, shift + j);
+      const auto fits = hn::Eq(hn::ShiftRightSame(r, out_bits - 1), hn::Zero(d64));
+      saturations += n - hn::CountTrue(d64, fits);
+      hn::Store(hn::IfThenElse(fits, r, max_out), d64, lanes);
+      for (size_t l = 0; l < n; ++l) ys[j + l] = int32_t(lanes[l]);
+    }
+  }
+  return saturations;
+#endif
+}
+const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
+
+}  // namespace HWY_NAMESPACE
+}  // namespace edrnr::chip
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace edrnr::chip {
+
+HWY_EXPORT(DotColumns);
+HWY_EXPORT(RequantRelu);
+HWY_EXPORT(TargetName);
+
+void tme_dot_columns(const int32_t* wt, size_t out_pad, size_t i_begin, size_t i_end, const int32_t* x, size_t x_stride,
+                     size_t samples, int32_t* y, size_t y_stride) {
+  HWY_DYNAMIC_DISPATCH(DotColumns)(wt, out_pad, i_begin, i_end, x, x_stride, samples, y, y_stride);
+}
+
+uint64_t tme_requant_relu(const int32_t* sum, size_t sum_stride, size_t samples, const int32_t* bias,
+                          const uint32_t* mult, const uint64_t* half, const uint64_t* shift, size_t out_pad,
+                          int out_bits, int32_t* y, size_t y_stride) {
+  return HWY_DYNAMIC_DISPATCH(RequantRelu)(sum, sum_stride, samples, bias, mult, half, shift, out_pad, out_bits, y,
+                                           y_stride);
+}
+
+const char* tme_kernel_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
+
+}  // namespace edrnr::chip
+#endif

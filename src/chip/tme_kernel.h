@@ -1,0 +1,38 @@
+#pragma once
+// The TME's multiply-accumulate array as a small integer GEMM, through
+// Highway with runtime dispatch (the best SIMD target the CPU has).
+#include <cstddef>
+#include <cstdint>
+
+namespace edrnr::chip {
+
+// Output rows of a transposed weight matrix are padded to a multiple of this
+// (the lanes of the widest int32 vector).
+inline constexpr size_t kTmeLanePad = 16;
+
+// For each of `samples` input rows x_s = x + s * x_stride and each output j <
+// out_pad:
+//   y[s * y_stride + j] = sum_{i in [i_begin, i_end)} wt[i * out_pad + j] * x_s[i]
+// in int32 arithmetic. wt is the weight matrix transposed (input-major, out_pad
+// a multiple of kTmeLanePad, padding zero). Exact when every partial sum fits
+// int32 (the caller's contract: |w| <= 2^7, |x| <= 2^15 and at most 2^8 inputs
+// give |sum| <= 2^30).
+void tme_dot_columns(const int32_t* wt, size_t out_pad, size_t i_begin, size_t i_end, const int32_t* x, size_t x_stride,
+                     size_t samples, int32_t* y, size_t y_stride);
+
+// The requantization of a hidden layer whose sums are exact: for each of
+// `samples` rows and each j < out_pad,
+//   v = max(sum[s * sum_stride + j] + bias[j], 0)   (int32, no overflow: the
+//       caller's contract)
+//   r = (v * mult[j] + half[j]) >> shift[j]          (exact in 64 bits:
+//       mult < 2^31, shift <= 62, half < 2^shift)
+//   y[s * y_stride + j] = min(r, 2^(out_bits - 1) - 1)
+// Returns how many values were clamped. out_bits in [1, 32].
+uint64_t tme_requant_relu(const int32_t* sum, size_t sum_stride, size_t samples, const int32_t* bias,
+                          const uint32_t* mult, const uint64_t* half, const uint64_t* shift, size_t out_pad,
+                          int out_bits, int32_t* y, size_t y_stride);
+
+// The SIMD target the dispatch picked (for benchmarks and reports).
+const char* tme_kernel_target();
+
+}  // namespace edrnr::chip
