@@ -82,7 +82,10 @@ void run_dram(const DramOptions& o) {
 
   StatsRegistry stats;
   sim::DramSystem dram(config, stats);
-  uint64_t requests = sim::run_dram_workload(dram, source);
+  Distribution& from_arrival =
+      stats.distribution("workload.read_latency_from_arrival", "cycles",
+                         "read latency from the request's arrival cycle to its last data (queue wait included)");
+  uint64_t requests = sim::run_dram_workload(dram, source, &from_arrival);
   dram.update_stats();
 
   std::cout << fmt::format("preset    {} ({})\n", config.name, preset_path.string());

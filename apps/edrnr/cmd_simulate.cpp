@@ -26,6 +26,7 @@
 #include "model/model_io.h"
 #include "render/cameras.h"
 #include "render/options.h"
+#include "sim/dram_trace.h"
 #include "sim/reproduce_runs.h"
 #include "sim/simulator.h"
 
@@ -36,6 +37,7 @@ namespace fs = std::filesystem;
 
 struct SimulateOptions {
   std::string model, chip = "edr_nr_40nm", dataset, split = "test", disable, output, trace_window = "0:50000";
+  std::string dram_trace;  // --dram-trace FILE: the frame's DRAM requests
   int view = 0, width = 0, height = 0, threads = 1;
   double orbit = 30, elevation = 30, radius = 4, fov = 40, clock = 0;
   bool all_points = false, quiet = false, table = false, allow_over_budget = false, sram = false;
@@ -167,6 +169,7 @@ void run_simulate(const SimulateOptions& o) {
   if (std::error_code ec; !o.output.empty() && fs::exists(o.output, ec) && !fs::is_directory(o.output, ec))
     fail("-o '{}': not a folder (simulate writes image.png, stats.json, config.yaml and trace.json into a folder)",
          o.output);
+  if (!o.dram_trace.empty()) check_output_path(o.dram_trace, "--dram-trace");
   const fs::path preset = find_chip_preset(o.chip);
   sim::SimConfig cfg = sim::load_sim_config(preset, config_dirs("dram"));
   if (!o.disable.empty()) apply_disable(o.disable, cfg.chip);
@@ -195,6 +198,17 @@ void run_simulate(const SimulateOptions& o) {
   opt.threads = o.threads;
   if (!o.output.empty()) parse_trace_window(o.trace_window, opt.trace_start_cycle, opt.trace_cycles);
   if (!o.quiet && isatty(STDERR_FILENO)) opt.progress = ProgressLine{};
+  std::string dram_trace;
+  if (!o.dram_trace.empty()) {
+    dram_trace = fmt::format("# DRAM requests of one frame of {} through edrnr simulate ({}, DRAM {})\n", o.model,
+                             preset.filename().string(), cfg.memory.dram.name);
+    dram_trace += "# address type cycle (DRAM clocks; one burst a line)\n";
+    const uint64_t burst_bytes = cfg.memory.dram.burst_bytes();
+    opt.dram_request_observer = [&dram_trace, burst_bytes](uint64_t cycle, sim::DramOp op, uint64_t address,
+                                                           uint32_t bytes) {
+      sim::append_dram_trace(dram_trace, address, bytes, op, cycle, burst_bytes);
+    };
+  }
   const auto t0 = std::chrono::steady_clock::now();
   sim::SimResult r = sim::simulate_chip(model, view.camera, cfg, opt);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -218,6 +232,7 @@ void run_simulate(const SimulateOptions& o) {
         "   MHz     V     FPS  paper      mW  paper   nJ/px  paper\n";
     sim::SimOptions quiet = opt;
     quiet.trace_cycles = 0;
+    quiet.dram_request_observer = nullptr;
     quiet.progress = nullptr;
     for (const sim::PaperOperatingPoint& p : sim::table1_operating_points()) {
       sim::SimConfig c = cfg;
@@ -264,6 +279,8 @@ void run_simulate(const SimulateOptions& o) {
     if (!r.trace.is_null()) write_file_atomic(dir / "trace.json", r.trace.dump() + "\n");
   }
 
+  if (!o.dram_trace.empty()) write_file_atomic(o.dram_trace, dram_trace);
+
   fmt::print("{} through the EDR-NR cycle simulator ({}), {} thread{}, {:.1f} s ({:.2f} M cycles/s)\n", o.model,
              preset.filename().string(), o.threads, o.threads > 1 ? "s" : "", seconds,
              double(r.summary.cycles) / seconds / 1e6);
@@ -274,6 +291,7 @@ void run_simulate(const SimulateOptions& o) {
   if (!o.output.empty())
     fmt::print("wrote       {0}/image.png, {0}/stats.json, {0}/config.yaml{1}\n", o.output,
                r.trace.is_null() ? "" : fmt::format(", {}/trace.json (cycles {})", o.output, o.trace_window));
+  if (!o.dram_trace.empty()) fmt::print("wrote       {} (DRAM requests, edrnr dram --trace format)\n", o.dram_trace);
 }
 
 void register_simulate_cmd(CLI::App& app) {
@@ -302,6 +320,8 @@ void register_simulate_cmd(CLI::App& app) {
   cmd->add_flag("--sram", o->sram, "print every on-chip buffer's size against Table I's SRAM budget");
   cmd->add_flag("--allow-over-budget", o->allow_over_budget,
                 "simulate a preset whose buffers exceed Table I's SRAM classes (the report is marked)");
+  cmd->add_option("--dram-trace", o->dram_trace,
+                  "also write the frame's DRAM requests to this file, in the trace format of edrnr dram --trace");
   cmd->add_flag("-q,--quiet", o->quiet, "no progress line");
   cmd->callback([o] { run_simulate(*o); });
 }

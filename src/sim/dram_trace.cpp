@@ -1,8 +1,12 @@
 #include "sim/dram_trace.h"
 
+#include <fmt/format.h>
+
 #include <charconv>
+#include <iterator>
 #include <memory>
 #include <random>
+#include <unordered_map>
 
 #include "core/error.h"
 #include "core/file_io.h"
@@ -82,6 +86,17 @@ std::vector<DramTraceRecord> load_dram_trace(const std::filesystem::path& path) 
   return parse_dram_trace(read_file_text(path, limits::kMaxTraceFileBytes), path.string());
 }
 
+void append_dram_trace(std::string& out, uint64_t address, uint64_t bytes, DramOp op, uint64_t cycle,
+                       uint64_t burst_bytes) {
+  if (bytes == 0 || burst_bytes == 0) return;
+  const char* type = op == DramOp::kWrite ? "WRITE" : "READ";
+  const uint64_t last = address + (bytes - 1);  // the last byte (no overflow past it)
+  for (uint64_t a = address - address % burst_bytes;; a += burst_bytes) {
+    fmt::format_to(std::back_inserter(out), "0x{:x} {} {}\n", a, type, cycle);
+    if (last - a < burst_bytes) break;
+  }
+}
+
 DramRequestSource trace_source(std::vector<DramTraceRecord> records) {
   auto shared = std::make_shared<std::vector<DramTraceRecord>>(std::move(records));
   auto next_index = std::make_shared<size_t>(0);
@@ -122,7 +137,7 @@ DramRequestSource stream_source(const DramConfig& config, uint64_t count, double
   };
 }
 
-uint64_t run_dram_workload(DramSystem& dram, const DramRequestSource& source) {
+uint64_t run_dram_workload(DramSystem& dram, const DramRequestSource& source, Distribution* read_latency_from_arrival) {
   const DramConfig& c = dram.config();
   const uint64_t burst_bytes = c.burst_bytes();
   // Far longer than any legal wait: a refresh plus a full queue of conflicts.
@@ -132,6 +147,7 @@ uint64_t run_dram_workload(DramSystem& dram, const DramRequestSource& source) {
   bool have = source(next);
   uint64_t accepted = 0;
   uint64_t last_progress = dram.cycle();
+  std::unordered_map<uint64_t, uint64_t> read_arrival;  // id -> arrival cycle, reads in flight
   while (have || !dram.idle()) {
     // Nothing in flight until the next arrival: jump there (exactly as ticking).
     if (have && dram.idle() && next.cycle > dram.cycle()) dram.advance_idle(next.cycle);
@@ -142,12 +158,20 @@ uint64_t run_dram_workload(DramSystem& dram, const DramRequestSource& source) {
              c.capacity_bytes(), c.capacity_bytes());
       }
       if (!dram.enqueue(next.op, address, static_cast<uint32_t>(burst_bytes), accepted)) break;
+      if (read_latency_from_arrival && next.op == DramOp::kRead) read_arrival.emplace(accepted, next.cycle);
       ++accepted;
       last_progress = dram.cycle();
       have = source(next);
     }
     dram.tick();
-    while (dram.pop_completion()) last_progress = dram.cycle();
+    while (const auto done = dram.pop_completion()) {
+      last_progress = dram.cycle();
+      if (read_latency_from_arrival && done->op == DramOp::kRead) {
+        const auto it = read_arrival.find(done->id);
+        read_latency_from_arrival->add(done->done_cycle - it->second);
+        read_arrival.erase(it);
+      }
+    }
     if (!dram.idle() && dram.cycle() - last_progress > stall_limit) {
       fail("DRAM model made no progress for {} cycles with {} requests in flight (internal fault)", stall_limit,
            dram.requests_in_flight());

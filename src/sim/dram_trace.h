@@ -14,6 +14,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/stats.h"
 #include "sim/dram.h"
 
 namespace edrnr::sim {
@@ -29,6 +30,13 @@ struct DramTraceRecord {
 // malformed line or a cycle smaller than the previous line's.
 std::vector<DramTraceRecord> parse_dram_trace(std::string_view text, const std::string& origin);
 std::vector<DramTraceRecord> load_dram_trace(const std::filesystem::path& path);
+
+// Appends to `out` one trace line per burst_bytes-aligned block that
+// [address, address + bytes) overlaps, all arriving at `cycle` (DRAM clocks):
+// the request as the DRAM model splits it into bursts. bytes == 0 appends
+// nothing.
+void append_dram_trace(std::string& out, uint64_t address, uint64_t bytes, DramOp op, uint64_t cycle,
+                       uint64_t burst_bytes);
 
 // A source of requests in arrival order: writes the next one and returns true,
 // or returns false when there are no more.
@@ -48,7 +56,11 @@ DramRequestSource stream_source(const DramConfig& config, uint64_t count, double
 // soon after as the queue has room) and ticks until every request has
 // completed. Returns the number of requests. Throws Error naming the trace
 // line if an address is beyond the capacity, or if the model stops making
-// progress (an internal fault).
-uint64_t run_dram_workload(DramSystem& dram, const DramRequestSource& source);
+// progress (an internal fault). If `read_latency_from_arrival` is given, it
+// gets each read's DRAM clocks from its arrival cycle in the source to its
+// last data: the latency its client sees, waiting for room in the queue
+// included (the model's own read latency counts from entry).
+uint64_t run_dram_workload(DramSystem& dram, const DramRequestSource& source,
+                           Distribution* read_latency_from_arrival = nullptr);
 
 }  // namespace edrnr::sim

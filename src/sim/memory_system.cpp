@@ -102,6 +102,7 @@ void MemorySystem::start(DataType type, bool write, uint64_t addr, uint32_t byte
   for (uint64_t a = addr, end = addr + bytes; a < end;) {
     const uint32_t n = uint32_t(std::min<uint64_t>(max_request_bytes_, end - a));
     waiting_.push_back({index, a, n, write});
+    if (request_observer_) request_observer_(dram_.cycle(), write ? DramOp::kWrite : DramOp::kRead, a, n);
     ++t.requests_left;
     a += n;
   }
@@ -134,6 +135,11 @@ void MemorySystem::write(DataType type, uint64_t addr, uint32_t bytes, uint64_t 
 void MemorySystem::advance(uint64_t cycle, std::vector<MemoryCompletion>& done) {
   const uint64_t target = uint64_t((unsigned __int128)(cycle + 1) * dram_hz_ / core_hz_);
   bool refused = false;
+  if (waiting_.empty() && dram_.idle()) {
+    // Nothing to hand over and nothing in flight: the same clocks in bulk.
+    dram_.advance_idle(target);
+    return;
+  }
   while (dram_.cycle() < target) {
     while (!waiting_.empty()) {
       const Request& r = waiting_.front();

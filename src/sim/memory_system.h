@@ -13,6 +13,7 @@
 #include <array>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -65,6 +66,10 @@ struct MemoryCompletion {
   uint64_t tag = 0;
 };
 
+// Sees one DRAM request: the DRAM clock at which it is offered, read or
+// write, its byte address and size.
+using DramRequestObserver = std::function<void(uint64_t dram_cycle, DramOp op, uint64_t address, uint32_t bytes)>;
+
 class MemorySystem {
  public:
   // Registers "dram.*" (the DDR3 model) and "mem.<type>.*" in `stats`, which
@@ -82,6 +87,13 @@ class MemorySystem {
   // Runs the DRAM through the end of core cycle `cycle` and appends the reads
   // that completed to `done` (in completion order).
   void advance(uint64_t cycle, std::vector<MemoryCompletion>& done);
+
+  // Optional observer of the DRAM requests: called once per request as a
+  // transfer is split, with the DRAM clock at which the request is first
+  // offered to the controller (advance() hands it over before the DRAM's next
+  // tick). An empty function stops it. `edrnr simulate --dram-trace` writes
+  // the requests as a trace (sim/dram_trace.h) with it.
+  void set_request_observer(DramRequestObserver observer) { request_observer_ = std::move(observer); }
 
   // No transfer waiting or in flight.
   bool idle() const { return transfers_in_flight_ == 0; }
@@ -133,6 +145,7 @@ class MemorySystem {
   uint64_t transfers_in_flight_ = 0;
   std::array<PerType, kDataTypes> per_type_;
   Counter& dram_rejections_;
+  DramRequestObserver request_observer_;
 };
 
 }  // namespace edrnr::sim

@@ -75,20 +75,42 @@ class BatchArithmetic {
   BatchArithmetic(const SceneModel& model, const ChipConfig& config, const ChipNumerics& n, const RayMath& math,
                   const Cfiu& cfiu, double delta)
       : model_(model),
+        n_(n),
         math_(math),
         cfiu_(cfiu),
         tme_(model, n, delta, size_t(config.mlp_cache_bytes)),
-        vru_(n, config.transmittance_min, config.background),
-        feature_(size_t(model.feature_channels)) {}
+        vru_(n, config.transmittance_min, config.background) {}
 
+  // The interpolation sums of every sample, the TME on the whole batch (the
+  // direction inputs once per ray), then compositing in sample order.
   void run(RayPacket& p, Flight& f) {
     tme_.load(f.cv_tag);
-    for (size_t i = 0; i < f.coords.size(); ++i) {
-      RayState& ray = p.rays[f.rays[i]];
-      cfiu_.weighted_sum(f.block, f.coords[i], feature_.data());
-      const TmeOutput out = tme_.eval(feature_.data(), ray.dir_code);
-      vru_.composite(ray, out.alpha, out.rgb);
+    const size_t n = f.coords.size(), F = size_t(model_.feature_channels);
+    if (features_.size() < n * F) features_.resize(n * F);
+    if (outputs_.size() < n) {
+      outputs_.resize(n);
+      dir_of_sample_.resize(n);
     }
+    if (dirs_.size() < p.rays.size()) {
+      dirs_.resize(p.rays.size());
+      dir_batch_.resize(p.rays.size(), 0);
+    }
+    ++batch_;
+    for (size_t i = 0; i < n; ++i) {
+      const uint8_t r = f.rays[i];
+      if (dir_batch_[r] != batch_) {
+        RayState& ray = p.rays[r];
+        // The front end leaves the encoding to this thread (once per ray).
+        if (ray.dir_code.empty())
+          ray.dir_code = Tme::encode_direction(ray.world_dir, model_.mlp_arch.dir_frequencies, n_);
+        tme_.direction_input(ray.dir_code, dirs_[r]);
+        dir_batch_[r] = batch_;
+      }
+      dir_of_sample_[i] = &dirs_[r];
+      cfiu_.weighted_sum(f.block, f.coords[i], &features_[i * F]);
+    }
+    tme_.eval_batch(n, features_.data(), dir_of_sample_.data(), outputs_.data());
+    for (size_t i = 0; i < n; ++i) vru_.composite(p.rays[f.rays[i]], outputs_[i].alpha, outputs_[i].rgb);
     f.stay = has_live_ray_in(math_, model_, p, f.cv_tag);
   }
 
@@ -97,11 +119,17 @@ class BatchArithmetic {
 
  private:
   const SceneModel& model_;
+  const ChipNumerics n_;
   const RayMath& math_;
   const Cfiu& cfiu_;
   Tme tme_;
   Vru vru_;
-  std::vector<int32_t> feature_;
+  std::vector<int32_t> features_;                   // F per sample of the batch
+  std::vector<TmeOutput> outputs_;                  // per sample
+  std::vector<const TmeDirection*> dir_of_sample_;  // per sample: its ray's direction inputs
+  std::vector<TmeDirection> dirs_;                  // per ray of the packet
+  std::vector<uint64_t> dir_batch_;                 // per ray: the batch dirs_ was computed for
+  uint64_t batch_ = 0;
 };
 
 // Runs BatchArithmetic jobs in order on a second thread. Each side spins
@@ -268,6 +296,8 @@ class Engine {
            cfiu_.cache().lines(), config.chip.ooo_queue_depth);
     for (uint32_t i = 0; i < uint32_t(batches_.size()); ++i) free_slots_.push_back(i);
     ftu_.set_micro_read_log(&micro_log_);
+    front_.set_encode_directions(false);  // the batch arithmetic encodes (on its thread with threads = 2)
+    mem_.set_request_observer(options.dram_request_observer);
     mlp_lines_ = ceil_div(mlp_bytes_, cfg_.memory.mlp_cache.line_bytes);
     uint64_t macs = 0, neurons = 0;
     if (model.mlp_count()) {

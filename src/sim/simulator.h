@@ -38,6 +38,7 @@
 #include "data/camera.h"
 #include "model/scene_model.h"
 #include "sim/energy.h"
+#include "sim/memory_system.h"
 #include "sim/sim_config.h"
 #include "sim/sram_budget.h"
 
@@ -62,6 +63,8 @@ struct SimOptions {
   // An internal fault is reported after this many cycles in which no unit
   // worked and no memory transfer was in flight.
   uint64_t deadlock_cycles = 100000;
+  // When set, sees every DRAM request of the frame (MemorySystem::set_request_observer).
+  DramRequestObserver dram_request_observer;
 };
 
 // The figures of a run that the report and the tests use; every one is also in
