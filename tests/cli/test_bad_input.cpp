@@ -196,6 +196,10 @@ const BadInput kCases[] = {
   {"DramJsonIsAFolder", "dram --preset ddr3-1600-4gb-x16-16bit --stream 10 --json {D}/folder", 1,
    "--json '{D}/folder': cannot write: it is a folder"},
   {"SimulateOutputIsAFile", "simulate {D}/m.edrnr --width 8 -q -o {D}/text.txt", 1, "-o '{D}/text.txt': not a folder"},
+  {"SimulateDramTraceIsAFolder", "simulate {D}/m.edrnr --width 8 -q --dram-trace {D}/folder", 1,
+   "--dram-trace '{D}/folder': cannot write: it is a folder"},
+  {"SimulateDramTraceNoFolder", "simulate {D}/m.edrnr --width 8 -q --dram-trace {D}/nodir/t.trace", 1,
+   "the folder '{D}/nodir' does not exist"},
 };
 // clang-format on
 
