@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 
 #include "core/error.h"
 
@@ -42,6 +43,23 @@ void check_widths(const std::vector<DenseF>& layers, const char* net) {
 float sigmoid(float x) { return 1.f / (1.f + std::exp(-x)); }
 
 }  // namespace
+
+void check_mlp_arch(const MlpArch& arch, int feature_channels, int max_width, const char* limit_note) {
+  const auto& dw = arch.density_widths;
+  const auto& cw = arch.color_widths;
+  if (dw.size() < 2 || cw.size() < 2) fail("mlp_arch needs at least one layer in each net");
+  if (dw.front() != feature_channels)
+    fail("mlp_arch density input {} does not match the {} feature channels", dw.front(), feature_channels);
+  if (dw.back() < 1 || cw.front() != dw.back() + arch.dir_dims())
+    fail("mlp_arch colour input {} is not the density output {} plus {} direction values", cw.front(), dw.back(),
+         arch.dir_dims());
+  if (cw.back() != 3) fail("mlp_arch colour net has {} outputs, expected 3", cw.back());
+  if (arch.dir_frequencies < 0) fail("mlp_arch direction frequencies {} is negative", arch.dir_frequencies);
+  const std::string note = *limit_note ? std::string(" (") + limit_note + ")" : std::string();
+  for (const auto* w : {&dw, &cw})
+    for (int n : *w)
+      if (n < 1 || n > max_width) fail("mlp_arch layer width {} is outside 1..{}{}", n, max_width, note);
+}
 
 MlpArch default_mlp_arch(int feature_channels) {
   MlpArch arch;

@@ -30,6 +30,12 @@ struct MlpOutput {
 // Its INT8 form (q8_bytes) fits the chip's MLP cache (kMlpCacheBytes).
 MlpArch default_mlp_arch(int feature_channels = 16);
 
+// Checks that `arch` chains: a density net from feature_channels inputs, a
+// colour net taking the density output plus the direction encoding and giving
+// 3 values, every layer 1..max_width wide. Throws Error naming the mismatch;
+// `limit_note` (may be empty) says whose limit max_width is.
+void check_mlp_arch(const MlpArch& arch, int feature_channels, int max_width, const char* limit_note);
+
 // Direction encoding, dir_dims = 3 + 6L values:
 // [dx, dy, dz, then for k = 0..L-1: sin(2^k dx), sin(2^k dy), sin(2^k dz), cos(2^k dx), cos(2^k dy), cos(2^k dz)].
 void encode_direction(const Vec3f& dir, int frequencies, float* out);

@@ -11,23 +11,6 @@ namespace {
 // The INT8 direction inputs have the fixed step 1/127 (+-1 is the largest code).
 constexpr double kDirectionStep = 1.0 / 127.0;
 
-void check_arch(const MlpArch& arch, int feature_channels) {
-  const auto& dw = arch.density_widths;
-  const auto& cw = arch.color_widths;
-  if (dw.size() < 2 || cw.size() < 2) fail("mlp_arch needs at least one layer in each net");
-  if (dw.front() != feature_channels)
-    fail("mlp_arch density input {} does not match the {} feature channels", dw.front(), feature_channels);
-  if (dw.back() < 1 || cw.front() != dw.back() + arch.dir_dims())
-    fail("mlp_arch colour input {} is not the density output {} plus {} direction values", cw.front(), dw.back(),
-         arch.dir_dims());
-  if (cw.back() != 3) fail("mlp_arch colour net has {} outputs, expected 3", cw.back());
-  if (arch.dir_frequencies < 0) fail("mlp_arch direction frequencies {} is negative", arch.dir_frequencies);
-  for (const auto* w : {&dw, &cw})
-    for (int n : *w)
-      if (n < 1 || n > kFastMaxWidth)
-        fail("mlp_arch layer width {} is outside 1..{} (the fast renderer's limit)", n, kFastMaxWidth);
-}
-
 void check_features(const SceneModel& m, const ResolvedForm& form) {
   const size_t F = size_t(m.feature_channels);
   const size_t values = m.block_count() * kBlockVerts * F;
@@ -147,7 +130,7 @@ FastModel pack_fast_model(const SceneModel& model, const ResolvedForm& form, Fas
   if (model.mlp_count() == 0) return fm;
 
   const MlpArch& arch = model.mlp_arch;
-  check_arch(arch, model.feature_channels);
+  check_mlp_arch(arch, model.feature_channels, kFastMaxWidth, "the fast renderer's limit");
   fm.geo_width = arch.geo_width();
   fm.dir_dims = arch.dir_dims();
   fm.dir_frequencies = arch.dir_frequencies;

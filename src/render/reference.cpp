@@ -24,22 +24,6 @@ void check_net(const std::vector<DenseF>& net, const std::vector<int>& widths, c
   }
 }
 
-void check_arch(const MlpArch& arch, int feature_channels) {
-  const auto& dw = arch.density_widths;
-  const auto& cw = arch.color_widths;
-  if (dw.size() < 2 || cw.size() < 2) fail("mlp_arch needs at least one layer in each net");
-  if (dw.front() != feature_channels)
-    fail("mlp_arch density input {} does not match the {} feature channels", dw.front(), feature_channels);
-  if (dw.back() < 1 || cw.front() != dw.back() + arch.dir_dims())
-    fail("mlp_arch colour input {} is not the density output {} plus {} direction values", cw.front(), dw.back(),
-         arch.dir_dims());
-  if (cw.back() != 3) fail("mlp_arch colour net has {} outputs, expected 3", cw.back());
-  if (arch.dir_frequencies < 0) fail("mlp_arch direction frequencies {} is negative", arch.dir_frequencies);
-  for (const auto* w : {&dw, &cw})
-    for (int n : *w)
-      if (n < 1 || n > kMlpEvalMaxWidth) fail("mlp_arch layer width {} is outside 1..{}", n, kMlpEvalMaxWidth);
-}
-
 void check_model(const SceneModel& m, const ResolvedForm& form) {
   m.check_structure();
   const size_t F = size_t(m.feature_channels);
@@ -57,7 +41,7 @@ void check_model(const SceneModel& m, const ResolvedForm& form) {
     }
   }
   if (m.mlp_count() > 0) {
-    check_arch(m.mlp_arch, m.feature_channels);
+    check_mlp_arch(m.mlp_arch, m.feature_channels, kMlpEvalMaxWidth, "");
     const size_t n = form.quantized_mlps ? m.mlps_q8.size() : m.mlps_f32.size();
     if (n != m.mlp_count()) fail("model has {} MLPs of the rendered form for {} coarse voxels", n, m.mlp_count());
     for (size_t i = 0; i < n; ++i) {
