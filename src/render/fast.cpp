@@ -24,20 +24,6 @@ constexpr int kFirstRoundSamples = 4;                     // samples a ray hands
 constexpr int kMaxRoundSamples = 8;                       // ... doubling each round up to this
 constexpr int kCvMicro = kMicroPerFine * kFinePerCoarse;  // micro voxels per coarse voxel edge
 
-void check_inputs(const Camera& camera, const RenderSettings& s) {
-  if (camera.width <= 0 || camera.height <= 0) fail("camera image size {}x{} is empty", camera.width, camera.height);
-  if (!(std::isfinite(camera.fx) && std::isfinite(camera.fy) && camera.fx != 0 && camera.fy != 0))
-    fail("camera focal lengths {}, {} are not finite and non-zero", camera.fx, camera.fy);
-  const Ray corner = camera.pixel_ray(0, 0);
-  if (!(std::isfinite(corner.origin.x) && std::isfinite(corner.origin.y) && std::isfinite(corner.origin.z) &&
-        std::isfinite(corner.dir.x) && std::isfinite(corner.dir.y) && std::isfinite(corner.dir.z)))
-    fail("camera transform gives no valid rays (a degenerate or non-finite transform_matrix)");
-  if (!(s.step_micro > 0.f && std::isfinite(s.step_micro))) fail("render step {} must be positive", s.step_micro);
-  if (!(s.transmittance_min >= 0.f && s.transmittance_min <= 1.f))
-    fail("transmittance threshold {} is outside [0, 1]", s.transmittance_min);
-  if (s.threads < 0) fail("thread count {} is negative", s.threads);
-}
-
 // Interleaves the bits of x and y (x in the even bits).
 uint64_t morton(uint32_t x, uint32_t y) {
   uint64_t r = 0;
@@ -288,7 +274,7 @@ FastRenderer::FastRenderer(const SceneModel& model, ModelForm form, FastPath pat
 
 Image FastRenderer::render(const Camera& camera, const RenderSettings& settings, RenderStats* stats,
                            FastProfile* profile) const {
-  check_inputs(camera, settings);
+  check_render_inputs(camera, settings);
   const int W = camera.width, H = camera.height;
   Image image(W, H, 3);
   const std::vector<Tile> tiles = z_order_tiles(W, H);

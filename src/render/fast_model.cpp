@@ -11,21 +11,6 @@ namespace {
 // The INT8 direction inputs have the fixed step 1/127 (+-1 is the largest code).
 constexpr double kDirectionStep = 1.0 / 127.0;
 
-void check_features(const SceneModel& m, const ResolvedForm& form) {
-  const size_t F = size_t(m.feature_channels);
-  const size_t values = m.block_count() * kBlockVerts * F;
-  if (m.block_count() == 0) return;
-  if (form.quantized_features) {
-    if (m.features_q4.size() != (values + 1) / 2 || m.feature_quant.scale.size() != F ||
-        m.feature_quant.zero_point.size() != F)
-      fail("model INT4 features hold {} bytes, expected {} for {} blocks", m.features_q4.size(), (values + 1) / 2,
-           m.block_count());
-  } else if (m.features_f32.size() != values) {
-    fail("model float features hold {} values, expected {} for {} blocks", m.features_f32.size(), values,
-         m.block_count());
-  }
-}
-
 // Shapes of the layers of one net, laid out from `offset` (advanced).
 std::vector<FastLayer> layout_net(const std::vector<int>& widths, size_t& offset, bool int8) {
   std::vector<FastLayer> net;
@@ -111,7 +96,7 @@ FastModel pack_fast_model(const SceneModel& model, const ResolvedForm& form, Fas
   const bool int8 = arithmetic == FastArithmetic::Int8;
   if (int8 && !(form.quantized_features && form.quantized_mlps))
     fail("the INT8 path needs the model's INT4 features and INT8 MLPs");
-  check_features(model, form);
+  check_feature_storage(model, form);
 
   FastModel fm;
   fm.model = &model;

@@ -28,18 +28,7 @@ void check_model(const SceneModel& m, const ResolvedForm& form) {
   m.check_structure();
   const size_t F = size_t(m.feature_channels);
   if (F < 1) fail("model has {} feature channels", m.feature_channels);
-  const size_t values = m.block_count() * kBlockVerts * F;
-  if (m.block_count() > 0) {
-    if (form.quantized_features) {
-      if (m.features_q4.size() != (values + 1) / 2 || m.feature_quant.scale.size() != F ||
-          m.feature_quant.zero_point.size() != F)
-        fail("model INT4 features hold {} bytes, expected {} for {} blocks", m.features_q4.size(), (values + 1) / 2,
-             m.block_count());
-    } else if (m.features_f32.size() != values) {
-      fail("model float features hold {} values, expected {} for {} blocks", m.features_f32.size(), values,
-           m.block_count());
-    }
-  }
+  check_feature_storage(m, form);
   if (m.mlp_count() > 0) {
     check_mlp_arch(m.mlp_arch, m.feature_channels, kMlpEvalMaxWidth, "");
     const size_t n = form.quantized_mlps ? m.mlps_q8.size() : m.mlps_f32.size();
@@ -63,7 +52,24 @@ void check_model(const SceneModel& m, const ResolvedForm& form) {
   }
 }
 
-void check_inputs(const Camera& camera, const RenderSettings& s) {
+}  // namespace
+
+void check_feature_storage(const SceneModel& m, const ResolvedForm& form) {
+  const size_t F = size_t(m.feature_channels);
+  const size_t values = m.block_count() * kBlockVerts * F;
+  if (m.block_count() == 0) return;
+  if (form.quantized_features) {
+    if (m.features_q4.size() != (values + 1) / 2 || m.feature_quant.scale.size() != F ||
+        m.feature_quant.zero_point.size() != F)
+      fail("model INT4 features hold {} bytes, expected {} for {} blocks", m.features_q4.size(), (values + 1) / 2,
+           m.block_count());
+  } else if (m.features_f32.size() != values) {
+    fail("model float features hold {} values, expected {} for {} blocks", m.features_f32.size(), values,
+         m.block_count());
+  }
+}
+
+void check_render_inputs(const Camera& camera, const RenderSettings& s) {
   if (camera.width <= 0 || camera.height <= 0) fail("camera image size {}x{} is empty", camera.width, camera.height);
   if (!(std::isfinite(camera.fx) && std::isfinite(camera.fy) && camera.fx != 0 && camera.fy != 0))
     fail("camera focal lengths {}, {} are not finite and non-zero", camera.fx, camera.fy);
@@ -76,8 +82,6 @@ void check_inputs(const Camera& camera, const RenderSettings& s) {
     fail("transmittance threshold {} is outside [0, 1]", s.transmittance_min);
   if (s.threads < 0) fail("thread count {} is negative", s.threads);
 }
-
-}  // namespace
 
 ResolvedForm resolve_model_form(const SceneModel& model, ModelForm requested) {
   const bool need_features = model.block_count() > 0, need_mlps = model.mlp_count() > 0;
@@ -107,7 +111,7 @@ ResolvedForm resolve_model_form(const SceneModel& model, ModelForm requested) {
 
 Image render_reference(const SceneModel& model, const Camera& camera, const RenderSettings& settings,
                        RenderStats* stats) {
-  check_inputs(camera, settings);
+  check_render_inputs(camera, settings);
   const ResolvedForm form = resolve_model_form(model, settings.form);
   check_model(model, form);
 

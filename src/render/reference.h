@@ -53,6 +53,12 @@ struct ResolvedForm {
 };
 ResolvedForm resolve_model_form(const SceneModel& model, ModelForm requested);
 
+// Checks shared by the renderers (each throws Error naming the problem): the
+// stored features of `form` hold exactly the model's blocks; the camera gives
+// finite rays of a non-empty image, and the settings are in range.
+void check_feature_storage(const SceneModel& model, const ResolvedForm& form);
+void check_render_inputs(const Camera& camera, const RenderSettings& settings);
+
 // Renders the whole image of `camera` (3 channels). Throws Error for an
 // unusable model (not finalize()d, sizes that do not match, MLP layers that
 // do not match mlp_arch, an occupied micro voxel without block or MLP), an

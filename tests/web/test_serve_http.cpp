@@ -205,7 +205,9 @@ TEST_F(ServeHttp, SimulationRunsOncePerClientAndReports) {
     if (st["state"] != "queued" && st["state"] != "running") break;
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
-  if (second->status != 202) EXPECT_EQ(second->status, 429);
+  if (second->status != 202) {
+    EXPECT_EQ(second->status, 429);
+  }
   ASSERT_EQ(st["state"], "done") << st.dump();
   const nlohmann::json& report = st["results"][0]["report"];
   const nlohmann::json& s = report["summary"];
