@@ -43,7 +43,8 @@ constexpr int kStopSignals[] = {SIGINT, SIGTERM, SIGHUP};
 const char* signal_name(int sig) { return sig == SIGTERM ? "SIGTERM" : sig == SIGHUP ? "SIGHUP" : "SIGINT"; }
 
 struct TrainCmdOptions {
-  std::string dataset, output, float_output, config, resume, checkpoint;
+  std::string dataset, output, float_output, resume, checkpoint;
+  std::vector<std::string> configs;
   double minutes = 0, checkpoint_minutes = 5;
   int64_t iters = 0, stop_after = -1;
   uint64_t seed = 0;
@@ -128,7 +129,7 @@ void run_train(const TrainCmdOptions& o) {
     // The dataset must be loaded as the checkpoint's run loaded it.
     cfg = train::Trainer::checkpoint_config(ckpt, o.resume);
   } else {
-    if (!o.config.empty()) cfg = train::load_train_config(o.config);
+    for (const auto& c : o.configs) cfg = train::load_train_config(c, cfg);
     if (o.iters_opt->count()) {
       if (o.iters < 1) fail("--iters {}: must be at least 1", o.iters);
       cfg.iters = o.iters;
@@ -250,7 +251,10 @@ void register_train_cmd(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand("train", "Learn a scene model from a NeRF dataset (CPU), quantization-aware");
   cmd->add_option("dataset", o->dataset, "NeRF dataset folder (transforms_train.json and images)")->required();
   cmd->add_option("-o,--output", o->output, "the quantized .edrnr model to write")->required();
-  o->config_opt = cmd->add_option("--config", o->config, "YAML preset (configs/train/*.yaml); flags override it");
+  o->config_opt = cmd->add_option("--config", o->configs,
+                                  "YAML preset (configs/train/*.yaml); repeated, each file's keys override the one "
+                                  "before; flags override them all")
+                      ->allow_extra_args(false);
   o->minutes_opt = cmd->add_option("--minutes", o->minutes, "time budget: the step count is fitted to it");
   o->iters_opt = cmd->add_option("--iters", o->iters, "training steps (overrides the preset and --minutes)");
   o->seed_opt = cmd->add_option("--seed", o->seed, "random seed");

@@ -113,6 +113,11 @@ void TrainConfig::validate() const {
   if (!(adam_beta1 >= 0.f && adam_beta1 < 1.f && adam_beta2 >= 0.f && adam_beta2 < 1.f && adam_eps > 0.f))
     fail("train config: Adam needs 0 <= beta < 1 and eps > 0");
   if (!(tv_weight >= 0.f)) fail("train config: tv_weight must not be negative");
+  if (tv_levels < 1 || tv_levels > int(levels.size()))
+    fail("train config: tv_levels {} must be between 1 and the number of levels ({})", tv_levels, levels.size());
+  if (!(block_tv_weight >= 0.f)) fail("train config: block_tv_weight must not be negative");
+  if (!(distortion_weight >= 0.f)) fail("train config: distortion_weight must not be negative");
+  if (!(mlp_tie_weight >= 0.f)) fail("train config: mlp_tie_weight must not be negative");
   if (!(init_features >= 0.f)) fail("train config: init_features must not be negative");
   if (occupancy_every < 1) fail("train config: occupancy_every must be at least 1");
   if (!(occupancy_decay > 0.f && occupancy_decay <= 1.f)) fail("train config: occupancy_decay must be in (0, 1]");
@@ -203,6 +208,10 @@ const std::map<std::string, Field>& fields() {
       {"adam_beta2", scalar(&TrainConfig::adam_beta2)},
       {"adam_eps", scalar(&TrainConfig::adam_eps)},
       {"tv_weight", scalar(&TrainConfig::tv_weight)},
+      {"tv_levels", scalar(&TrainConfig::tv_levels)},
+      {"block_tv_weight", scalar(&TrainConfig::block_tv_weight)},
+      {"distortion_weight", scalar(&TrainConfig::distortion_weight)},
+      {"mlp_tie_weight", scalar(&TrainConfig::mlp_tie_weight)},
       {"init_features", scalar(&TrainConfig::init_features)},
       {"occupancy_every", scalar(&TrainConfig::occupancy_every)},
       {"occupancy_decay", scalar(&TrainConfig::occupancy_decay)},

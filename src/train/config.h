@@ -44,8 +44,12 @@ struct TrainConfig {
   float lr_final = 0.05f;   // the learning rate decays exponentially to this factor at the last step
   int64_t lr_warmup = 100;  // linear warm-up steps
   float adam_beta1 = 0.9f, adam_beta2 = 0.99f, adam_eps = 1e-15f;
-  float tv_weight = 0.f;        // total variation on the finest level (main phase)
-  float init_features = 1e-4f;  // initial feature values: uniform in +-this
+  float tv_weight = 0.f;          // total variation on the pyramid's finest levels (main phase)
+  int tv_levels = 1;              // how many of the finest levels tv_weight applies to
+  float block_tv_weight = 0.f;    // total variation on the feature blocks, copies across faces included (later phases)
+  float distortion_weight = 0.f;  // distortion loss per ray (train/volume.h), distances in scene-box edges
+  float mlp_tie_weight = 0.f;     // per-CV phases: squared distance of each MLP's weights to the MLPs' mean
+  float init_features = 1e-4f;    // initial feature values: uniform in +-this
 
   // --- occupancy ---
   int occupancy_every = 16;       // steps between partial refreshes (one of 8 parts each)

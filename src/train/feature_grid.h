@@ -85,9 +85,9 @@ class FeaturePyramid {
   // Adam step on touched vertices; clears their gradients.
   void adam_step(const AdamStep& step);
   // Adds weight * dTV/dvalue of the total variation (sum of squared
-  // differences between neighbouring vertices) over touched vertices of the
-  // finest level only to its gradient. Call after scatter_gradients.
-  void add_tv_gradient(float weight);
+  // differences between neighbouring vertices) over the touched vertices of
+  // the `levels` finest levels to their gradients. Call after scatter_gradients.
+  void add_tv_gradient(float weight, int levels = 1);
 
  private:
   int micro_res_ = 0;
@@ -144,6 +144,11 @@ class BlockFeatures {
   // estimator when quantized). Slabs must be one fine voxel (4 micro) high.
   void scatter_gradients(const GradientSlabs& slabs, const std::vector<float>& pos, const std::vector<int16_t>& micro,
                          const std::vector<float>& d_feat);
+  // Adds weight * dTV/dvalue to the gradient of every touched vertex: squared
+  // differences to its neighbours in its block, and to its own copies in the
+  // face-adjacent blocks (a vertex on a block face is stored once per block;
+  // this keeps the copies together). Call after scatter_gradients.
+  void add_tv_gradient(float weight);
   void adam_step(const AdamStep& step);
 
  private:

@@ -100,6 +100,7 @@ struct Batch {
   size_t n_samples = 0;
   std::vector<float> pos;       // 3 per sample: micro-grid position
   std::vector<int16_t> micro;   // 3 per sample: micro voxel
+  std::vector<int32_t> cand;    // candidate index k along the ray
   std::vector<int32_t> ray;     // owning ray
   std::vector<int32_t> mlp;     // MLP index
   std::vector<float> feat;      // F per sample
@@ -120,6 +121,7 @@ struct Batch {
     size_t cap = std::max(n, pos.size() / 3 * 2);
     pos.resize(3 * cap);
     micro.resize(3 * cap);
+    cand.resize(cap);
     ray.resize(cap);
     mlp.resize(cap);
     feat.resize(cap * size_t(F));
@@ -388,12 +390,14 @@ struct Trainer::State {
     std::vector<int32_t> count;
     std::vector<float> cand_pos;
     std::vector<int16_t> cand_micro;
+    std::vector<int32_t> cand_k;
     for (int round = 0; !live.empty(); ++round) {
       const int K = std::min(kMaxRoundSamples, kFirstRoundSamples << std::min(round, 8));
       const size_t L = live.size();
       count.assign(L, 0);
       cand_pos.resize(L * size_t(K) * 3);
       cand_micro.resize(L * size_t(K) * 3);
+      cand_k.resize(L * size_t(K));
 #pragma omp parallel for schedule(dynamic, 64)
       for (size_t li = 0; li < L; ++li) {
         const int i = live[li];
@@ -418,6 +422,7 @@ struct Trainer::State {
             cand_pos[o + size_t(a)] = p[a];
             cand_micro[o + size_t(a)] = int16_t(m[a]);
           }
+          cand_k[li * size_t(K) + size_t(c)] = k;
           ++c;
         }
         b.k_next[size_t(i)] = k;
@@ -442,6 +447,7 @@ struct Trainer::State {
             b.micro[3 * s + size_t(a)] = cand_micro[o + size_t(a)];
           }
           b.ray[s] = live[li];
+          b.cand[s] = cand_k[li * size_t(K) + size_t(c)];
           b.mlp[s] = mlp_of_micro(b.micro[3 * s], b.micro[3 * s + 1], b.micro[3 * s + 2]);
           b.active[s] = 0;
         }
@@ -575,9 +581,12 @@ struct Trainer::State {
   double composite_rays(Batch& b, bool with_grad) const {
     const int n = b.n_rays;
     const float inv_n = 1.f / float(3 * n);
+    // The distortion loss measures distances along the ray in scene-box edges.
+    const float dist_scale = cfg.distortion_weight / float(n);
+    const float interval = cfg.step_micro / float(cfg.micro_res);
 #pragma omp parallel
     {
-      std::vector<float> raw, rgb, d_raw, d_rgb;
+      std::vector<float> raw, rgb, d_raw, d_rgb, t;
 #pragma omp for schedule(dynamic, 64)
       for (int i = 0; i < n; ++i) {
         const int32_t first = b.ray_first[size_t(i)], cnt = b.ray_count[size_t(i)];
@@ -609,6 +618,11 @@ struct Trainer::State {
         d_raw.resize(size_t(cnt));
         d_rgb.resize(3 * size_t(cnt));
         composite_backward(raw.data(), rgb.data(), cnt, delta, bg, d_pixel, d_raw.data(), d_rgb.data());
+        if (dist_scale > 0.f) {
+          t.resize(size_t(cnt));
+          for (int j = 0; j < cnt; ++j) t[size_t(j)] = float(b.cand[size_t(b.order[size_t(first + j)])]) * interval;
+          distortion_backward(raw.data(), t.data(), cnt, delta, interval, dist_scale, d_raw.data());
+        }
         for (int j = 0; j < cnt; ++j) {
           const size_t s = size_t(b.order[size_t(first + j)]);
           b.d_raw[s] = d_raw[size_t(j)];
@@ -1008,6 +1022,7 @@ struct Trainer::State {
     lap(kComposite);
     std::vector<float> grad;
     backward_mlps(b, grad, phase == Phase::Quantize);
+    if (phase != Phase::Main) add_mlp_tie_gradient(grad);
     lap(kBackward);
 
     // Feature gradients, slab by slab.
@@ -1020,13 +1035,14 @@ struct Trainer::State {
     if (phase == Phase::Main) {
       slabs.build(cfg.micro_res, pyramid.slab_micro(), active_ids, b.micro);
       pyramid.scatter_gradients(slabs, b.pos, b.micro, b.d_feat);
-      pyramid.add_tv_gradient(cfg.tv_weight);
+      pyramid.add_tv_gradient(cfg.tv_weight, cfg.tv_levels);
       lap(kScatter);
       ++feature_adam_t;
       pyramid.adam_step(AdamStep(adam_settings(), cfg.lr_features * lr, feature_adam_t));
     } else {
       slabs.build(cfg.micro_res, kMicroPerFine, active_ids, b.micro);
       blocks.scatter_gradients(slabs, b.pos, b.micro, b.d_feat);
+      blocks.add_tv_gradient(cfg.block_tv_weight);
       lap(kScatter);
       ++feature_adam_t;
       blocks.adam_step(AdamStep(adam_settings(), cfg.lr_features * lr, feature_adam_t));
@@ -1053,6 +1069,20 @@ struct Trainer::State {
       phase = Phase::Done;
       update_fake_quantized_mlps();  // render() then reads the weights export_model(true) writes
     }
+  }
+
+  // Pulls every per-CV MLP toward the mean of all of them (mlp_tie_weight):
+  // an MLP seen by few samples stays near what the others agree on.
+  void add_mlp_tie_gradient(std::vector<float>& grad) const {
+    if (!(cfg.mlp_tie_weight > 0.f) || n_mlps < 2) return;
+    const size_t P = layout.param_count;
+    std::vector<double> mean(P, 0.0);
+    for (int m = 0; m < n_mlps; ++m)
+      for (size_t k = 0; k < P; ++k) mean[k] += mlp_params[size_t(m) * P + k];
+    for (size_t k = 0; k < P; ++k) mean[k] /= double(n_mlps);
+    for (int m = 0; m < n_mlps; ++m)
+      for (size_t k = 0; k < P; ++k)
+        grad[size_t(m) * P + k] += 2.f * cfg.mlp_tie_weight * float(double(mlp_params[size_t(m) * P + k]) - mean[k]);
   }
 
   void update_fake_quantized_mlps() {

@@ -32,4 +32,16 @@ CompositeResult composite(const float* raw, const float* rgb, int n, float delta
 void composite_backward(const float* raw, const float* rgb, int n, float delta, const float background[3],
                         const float d_pixel[3], float* d_raw, float* d_rgb);
 
+// The distortion loss of one ray (Barron et al., mip-NeRF 360):
+//   L = sum_i sum_j w_i w_j |t_i - t_j| + 1/3 sum_i w_i^2 s
+// over its n samples (weights w_i = T_i alpha_i as composite() makes them),
+// t_i the samples' positions along the ray in increasing order and s the
+// length of the interval each sample stands for, in any one unit. It pulls a
+// ray's weight together into one short stretch (a surface) and away from
+// floaters spread along the ray.
+double distortion_loss(const float* raw, const float* t, int n, float delta, float s);
+// Adds scale * dL/draw of distortion_loss to d_raw (n), with the same clamp
+// rule as composite_backward.
+void distortion_backward(const float* raw, const float* t, int n, float delta, float s, float scale, float* d_raw);
+
 }  // namespace edrnr::train

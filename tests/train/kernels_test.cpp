@@ -242,6 +242,43 @@ TEST(Volume, CompositeBackwardMatchesFiniteDifferences) {
   }
 }
 
+TEST(Volume, DistortionLossKnownValues) {
+  // One sample holding all the weight: only the self term w^2 s / 3 remains.
+  const float delta = 0.1f;
+  const float opaque[1] = {std::log(200.f / delta)};  // tau = 200: w = 1 - exp(-200) = 1
+  const float t1[1] = {0.5f};
+  EXPECT_NEAR(distortion_loss(opaque, t1, 1, delta, 0.3f), 0.1, 1e-6);
+  // Two samples of weight 1/2 each, 2 apart: 2 * (1/2)(1/2) * 2 + 2 * (1/4) s / 3.
+  // w_0 = 1/2 needs tau_0 = ln 2; w_1 = 1/2 needs alpha_1 = 1 (an opaque second sample).
+  const float raw[2] = {std::log(std::log(2.f) / delta), std::log(200.f / delta)};
+  const float t2[2] = {1.f, 3.f};
+  EXPECT_NEAR(distortion_loss(raw, t2, 2, delta, 0.6f), 1.0 + 0.1, 1e-5);
+}
+
+TEST(Volume, DistortionBackwardMatchesFiniteDifferences) {
+  const int n = 9;
+  std::vector<float> raw(n), t(n);
+  for (int i = 0; i < n; ++i) {
+    raw[size_t(i)] = rnd(6, uint64_t(i), -1.f, 4.f);
+    t[size_t(i)] = 0.3f * float(i) + (i > 4 ? 1.f : 0.f);  // increasing, with a gap
+  }
+  raw[3] = 20.f;  // beyond the clamp: no gradient
+  const float delta = 0.05f, s = 0.3f, scale = 0.7f;
+  std::vector<float> d_raw(n, 0.25f);  // the loss gradient is added to what is there
+  distortion_backward(raw.data(), t.data(), n, delta, s, scale, d_raw.data());
+  const float h = 1e-3f;
+  for (int i = 0; i < n; ++i) {
+    auto p = raw, m = raw;
+    p[size_t(i)] += h;
+    m[size_t(i)] -= h;
+    const double fd =
+        scale * (distortion_loss(p.data(), t.data(), n, delta, s) - distortion_loss(m.data(), t.data(), n, delta, s)) /
+        (2.0 * h);
+    EXPECT_NEAR(d_raw[size_t(i)] - 0.25f, fd, 1e-3 * (1 + std::fabs(fd))) << "raw " << i;
+  }
+  EXPECT_EQ(d_raw[3], 0.25f);
+}
+
 // --- feature grids ---
 
 struct GridSamples {
@@ -282,6 +319,59 @@ TEST(FeatureGrid, PyramidInterpolatesLinearFunctionsExactly) {
   for (int li = 0; li < 3; ++li)
     for (int k = 0; k < 4; ++k)
       EXPECT_NEAR(out[li * 4 + k], float(k + 1) * p.x - 0.5f * p.y + 0.25f * p.z, 1e-4) << li << " " << k;
+}
+
+TEST(FeatureGrid, PyramidTotalVariationCoversTheFinestLevelsAsked) {
+  const int R = 8;
+  for (int tv_levels : {1, 2}) {
+    FeaturePyramid pyr(R, {2, 4, 8}, 21, 0.5f);
+    const int F = pyr.channels();
+    // A sample in every micro voxel touches every vertex of every level.
+    GridSamples s;
+    int id = 0;
+    for (int z = 0; z < R; ++z)
+      for (int y = 0; y < R; ++y)
+        for (int x = 0; x < R; ++x) {
+          const int m[3] = {x, y, z};
+          for (int a = 0; a < 3; ++a) {
+            s.pos.push_back(float(m[a]) + rnd(22, uint64_t(3 * id + a), 0.1f, 0.9f));
+            s.micro.push_back(int16_t(m[a]));
+          }
+          s.ids.push_back(id++);
+        }
+    std::vector<float> r(s.ids.size() * size_t(F), 1.f);
+    GradientSlabs slabs;
+    slabs.build(R, pyr.slab_micro(), s.ids, s.micro);
+    pyr.scatter_gradients(slabs, s.pos, s.micro, r);
+    std::vector<std::vector<float>> before;
+    for (const auto& L : pyr.levels()) before.push_back(L.adam.grad);
+    const float weight = 0.2f;
+    pyr.add_tv_gradient(weight, tv_levels);
+    for (int li = 0; li < 3; ++li) {
+      const PyramidLevel& L = pyr.levels()[size_t(li)];
+      const int n = L.res + 1;
+      const bool covered = li >= 3 - tv_levels;
+      for (int z = 0; z < n; ++z)
+        for (int y = 0; y < n; ++y)
+          for (int x = 0; x < n; ++x)
+            for (int k = 0; k < kLevelChannels; ++k) {
+              // d/dv of sum over neighbour pairs (v - u)^2: 2 (v - u) per neighbour.
+              const int c[3] = {x, y, z};
+              const float v = L.value[L.vertex_index(x, y, z) * kLevelChannels + size_t(k)];
+              double expect = 0;
+              for (int a = 0; a < 3; ++a)
+                for (int d = -1; d <= 1; d += 2) {
+                  int q[3] = {c[0], c[1], c[2]};
+                  q[a] += d;
+                  if (q[a] < 0 || q[a] >= n) continue;
+                  expect += 2.0 * weight * (v - L.value[L.vertex_index(q[0], q[1], q[2]) * kLevelChannels + size_t(k)]);
+                }
+              if (!covered) expect = 0;
+              const size_t i = L.vertex_index(x, y, z) * kLevelChannels + size_t(k);
+              EXPECT_NEAR(L.adam.grad[i] - before[size_t(li)][i], expect, 1e-5) << tv_levels << " " << li;
+            }
+    }
+  }
 }
 
 TEST(FeatureGrid, PyramidGradientMatchesFiniteDifferences) {
@@ -408,6 +498,67 @@ TEST(FeatureGrid, BlockGradientMatchesFiniteDifferences) {
     const double lm = loss(blk);
     blk.values()[v] = keep;
     EXPECT_NEAR(blk.adam().grad[v], lp - lm, 1e-3 * (1 + std::fabs(lp - lm))) << "value " << v;
+  }
+}
+
+TEST(FeatureGrid, BlockTotalVariationIsTheGradientOfItsEnergy) {
+  const int R = 32, F = 2;
+  // Fine voxels (1, 2, 3) and (2, 2, 3): block 0's face x = 4 is block 1's face x = 0.
+  std::vector<uint32_t> fine = {linear_index(1, 2, 3, 8), linear_index(2, 2, 3, 8)};
+  std::vector<float> values(fine.size() * kBlockVerts * F);
+  for (size_t i = 0; i < values.size(); ++i) values[i] = rnd(41, i, -1.f, 1.f);
+  BlockFeatures blk(R, F, fine, values);
+  // One sample in every micro voxel of both blocks touches every vertex.
+  GridSamples s;
+  int id = 0;
+  for (int z = 12; z < 16; ++z)
+    for (int y = 8; y < 12; ++y)
+      for (int x = 4; x < 12; ++x) {
+        const int m[3] = {x, y, z};
+        for (int a = 0; a < 3; ++a) {
+          s.pos.push_back(float(m[a]) + rnd(42, uint64_t(3 * id + a), 0.1f, 0.9f));
+          s.micro.push_back(int16_t(m[a]));
+        }
+        s.ids.push_back(id++);
+      }
+  std::vector<float> r(s.ids.size() * F, 1.f);
+  GradientSlabs slabs;
+  slabs.build(R, kMicroPerFine, s.ids, s.micro);
+  blk.scatter_gradients(slabs, s.pos, s.micro, r);
+  const std::vector<float> before = blk.adam().grad;
+  const float weight = 0.3f;
+  blk.add_tv_gradient(weight);
+  // The energy: squared differences of neighbours in a block, and of the two
+  // copies of every vertex on the shared face.
+  auto energy = [&](const std::vector<float>& v) {
+    double E = 0;
+    auto at = [&](int b, int x, int y, int z, int c) {
+      return double(v[(size_t(b) * kBlockVerts + size_t(x + 5 * (y + 5 * z))) * F + size_t(c)]);
+    };
+    for (int b = 0; b < 2; ++b)
+      for (int z = 0; z < 5; ++z)
+        for (int y = 0; y < 5; ++y)
+          for (int x = 0; x < 5; ++x)
+            for (int c = 0; c < F; ++c) {
+              if (x < 4) E += std::pow(at(b, x, y, z, c) - at(b, x + 1, y, z, c), 2);
+              if (y < 4) E += std::pow(at(b, x, y, z, c) - at(b, x, y + 1, z, c), 2);
+              if (z < 4) E += std::pow(at(b, x, y, z, c) - at(b, x, y, z + 1, c), 2);
+            }
+    for (int z = 0; z < 5; ++z)
+      for (int y = 0; y < 5; ++y)
+        for (int c = 0; c < F; ++c) E += std::pow(at(0, 4, y, z, c) - at(1, 0, y, z, c), 2);
+    return E;
+  };
+  std::vector<float> v = blk.values();
+  for (size_t i = 0; i < v.size(); ++i) {
+    const float keep = v[i];
+    v[i] = keep + 0.25f;
+    const double ep = energy(v);
+    v[i] = keep - 0.25f;
+    const double em = energy(v);
+    v[i] = keep;
+    const double fd = weight * (ep - em) / 0.5;  // exact: the energy is quadratic
+    EXPECT_NEAR(blk.adam().grad[i] - before[i], fd, 1e-4 * (1 + std::fabs(fd))) << "value " << i;
   }
 }
 

@@ -209,6 +209,35 @@ TEST(Train, ResultDoesNotDependOnTheThreadCount) {
   EXPECT_EQ(model_bytes(a, true), model_bytes(b, true));
 }
 
+TEST(Train, RegularisersActAndKeepTheResultIndependentOfThreads) {
+  const Dataset data = load("train");
+  TrainConfig reg = short_config();
+  reg.tv_weight = 1e-5f;
+  reg.tv_levels = 2;
+  reg.block_tv_weight = 1e-5f;
+  reg.distortion_weight = 0.01f;
+  reg.mlp_tie_weight = 1e-3f;
+  TrainOptions one, two;
+  one.threads = 1;
+  two.threads = 2;
+  Trainer a(data, reg), b(data, reg), plain(data, short_config());
+  ASSERT_TRUE(a.run(one));
+  ASSERT_TRUE(b.run(two));
+  ASSERT_TRUE(plain.run(two));
+  EXPECT_EQ(model_bytes(a, true), model_bytes(b, true));
+  EXPECT_NE(model_bytes(a, true), model_bytes(plain, true));
+  // The terms that act after the freeze only (the others have gradient tests
+  // in kernels_test.cpp) each change the result alone.
+  for (int term = 0; term < 2; ++term) {
+    TrainConfig c = short_config();
+    if (term == 0) c.block_tv_weight = 1e-5f;
+    if (term == 1) c.mlp_tie_weight = 1e-3f;
+    Trainer t(data, c);
+    ASSERT_TRUE(t.run(two));
+    EXPECT_NE(model_bytes(t, false), model_bytes(plain, false)) << "term " << term;
+  }
+}
+
 TEST(Train, ExportedModelRendersWhatTrainingRendered) {
   // The trainer's own forward pass and render_reference on the exported model
   // agree, in float (before quantization) and quantized (at the end).
@@ -269,6 +298,13 @@ TEST(Train, RejectsBadInputWithClearErrors) {
   EXPECT_NE(message([] { parse_train_config("iters: many\n", "p.yaml"); }).find("'iters'"), std::string::npos);
   EXPECT_NE(message([] { parse_train_config("color_hidden: [256, 256]\n", "p.yaml"); }).find("MLP cache"),
             std::string::npos);
+  EXPECT_NE(message([] { parse_train_config("tv_levels: 5\n", "p.yaml"); }).find("tv_levels"), std::string::npos);
+  EXPECT_NE(message([] { parse_train_config("distortion_weight: -1\n", "p.yaml"); }).find("distortion_weight"),
+            std::string::npos);
+  EXPECT_NE(message([] { parse_train_config("block_tv_weight: -1\n", "p.yaml"); }).find("block_tv_weight"),
+            std::string::npos);
+  EXPECT_NE(message([] { parse_train_config("mlp_tie_weight: -1\n", "p.yaml"); }).find("mlp_tie_weight"),
+            std::string::npos);
 }
 
 TEST(Train, PresetsAreValid) {
@@ -279,6 +315,15 @@ TEST(Train, PresetsAreValid) {
     // The YAML dump reads back to the same settings.
     EXPECT_EQ(to_yaml(parse_train_config(to_yaml(c), "dump")), to_yaml(c)) << e.path();
   }
+  // The ablation overlays (scripts/train-ablation.sh) on top of the default preset.
+  const fs::path train_dir = fs::path(EDRNR_SOURCE_DIR) / "configs" / "train";
+  int overlays = 0;
+  for (const auto& e : fs::directory_iterator(train_dir / "ablation")) {
+    const TrainConfig c = load_train_config(e.path(), load_train_config(train_dir / "default.yaml"));
+    EXPECT_NO_THROW(c.validate()) << e.path();
+    ++overlays;
+  }
+  EXPECT_GE(overlays, 5);
 }
 
 }  // namespace
