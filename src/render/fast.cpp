@@ -18,10 +18,15 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-constexpr int kTile = 16;                                 // tile edge, pixels
-constexpr int kTileRays = kTile * kTile;                  // rays per packet (a multiple of every SIMD width)
-constexpr int kFirstRoundSamples = 4;                     // samples a ray hands over in the first round
-constexpr int kMaxRoundSamples = 8;                       // ... doubling each round up to this
+constexpr int kTile = 16;                 // tile edge, pixels
+constexpr int kTileRays = kTile * kTile;  // rays per packet (a multiple of every SIMD width)
+constexpr int kFirstRoundSamples = 4;     // samples a ray hands over in the first round
+constexpr int kMaxRoundSamples = 8;       // ... doubling each round up to this
+// A ray whose transmittance is already below kDimTransmittance is likely to
+// end within a sample or two: it hands over at most kDimRoundSamples per
+// round, so fewer samples past its end run through an MLP.
+constexpr float kDimTransmittance = 0.9f;
+constexpr int kDimRoundSamples = 2;
 constexpr int kCvMicro = kMicroPerFine * kFinePerCoarse;  // micro voxels per coarse voxel edge
 
 // Interleaves the bits of x and y (x in the even bits).
@@ -49,6 +54,45 @@ std::vector<Tile> z_order_tiles(int W, int H) {
   return tiles;
 }
 
+// Whether no pixel ray of the tile can meet `box`: the rays through its
+// pixel centres lie in the cone spanned by its four corner rays, and the box
+// lies wholly outside one of the cone's side planes, by a margin far above
+// the rounding of a ray's direction. Conservative: false when unsure
+// (degenerate tiles of one pixel row or column, the camera inside the box).
+bool tile_misses_box(const Camera& cam, const Tile& t, const Box3d& box) {
+  const Vec3d o = cam.origin();
+  const double u[2] = {t.x0 + 0.5, t.x1 - 0.5}, v[2] = {t.y0 + 0.5, t.y1 - 0.5};
+  Vec3d c[4];  // corner directions (not normalized), in order around the tile
+  const int order[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+  for (int i = 0; i < 4; ++i) {
+    const Vec3d dc{(u[order[i][0]] - cam.cx) / cam.fx, -(v[order[i][1]] - cam.cy) / cam.fy, -1.0};
+    c[i] = {cam.c2w[0] * dc.x + cam.c2w[1] * dc.y + cam.c2w[2] * dc.z,
+            cam.c2w[4] * dc.x + cam.c2w[5] * dc.y + cam.c2w[6] * dc.z,
+            cam.c2w[8] * dc.x + cam.c2w[9] * dc.y + cam.c2w[10] * dc.z};
+  }
+  Vec3d p[8];
+  double reach = 0;
+  for (int i = 0; i < 8; ++i) {
+    p[i] = Vec3d{(i & 1) ? box.hi.x : box.lo.x, (i & 2) ? box.hi.y : box.lo.y, (i & 4) ? box.hi.z : box.lo.z} - o;
+    reach = std::max({reach, std::abs(p[i].x), std::abs(p[i].y), std::abs(p[i].z)});
+  }
+  for (int i = 0; i < 4; ++i) {
+    const Vec3d& a = c[i];
+    const Vec3d& b = c[(i + 1) % 4];
+    Vec3d n{a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+    const Vec3d& inner = c[(i + 2) % 4];
+    const double side = n.x * inner.x + n.y * inner.y + n.z * inner.z;
+    const double n_len = std::abs(n.x) + std::abs(n.y) + std::abs(n.z);
+    if (!(std::abs(side) > 1e-9 * n_len * (std::abs(inner.x) + std::abs(inner.y) + std::abs(inner.z)))) continue;
+    if (side < 0) n = Vec3d{-n.x, -n.y, -n.z};  // n points into the cone
+    const double margin = 1e-6 * n_len * reach;
+    bool outside = true;
+    for (int k = 0; k < 8 && outside; ++k) outside = n.x * p[k].x + n.y * p[k].y + n.z * p[k].z < -margin;
+    if (outside) return true;
+  }
+  return false;
+}
+
 // One thread's working set, reused from tile to tile.
 struct TileWork {
   std::vector<FastMarcher> marchers;
@@ -57,6 +101,7 @@ struct TileWork {
   float T[kTileRays], rgb[kTileRays][3];
   bool open[kTileRays];       // may still have samples and T above the threshold
   bool exhausted[kTileRays];  // its march has ended
+  int active[kTileRays];      // the open rays
   uint32_t begin[kTileRays], end[kTileRays];
   std::vector<FastSample> samples;
   std::vector<MarchSample> group_samples;  // fast_march_group's output
@@ -91,8 +136,18 @@ class TileRenderer {
     Clock::time_point t = Clock::now();
     const int tw = tile.x1 - tile.x0;
     const int n = tw * (tile.y1 - tile.y0);
+    if (tile_misses_box(camera_, tile, skip_.region)) {  // no ray meets the region (which holds the AABB)
+      tot.stats.rays += uint64_t(n);
+      for (int r = 0; r < n; ++r) {
+        float* px = image_.at(tile.x0 + r % tw, tile.y0 + r / tw);
+        for (int c = 0; c < 3; ++c) px[c] = s_.background[c];
+      }
+      if (profile_) tot.profile.traversal_s += since(t);
+      return;
+    }
     w.marchers.clear();
     w.marchers.reserve(kTileRays);
+    int n_active = 0;  // w.active[0, n_active): the open rays, in increasing order
     for (int r = 0; r < kTileRays; ++r) {
       if (r >= n) {  // padding lanes of the direction encoding
         w.dx[r] = w.dy[r] = w.dz[r] = 0.f;
@@ -100,38 +155,43 @@ class TileRenderer {
       }
       const Ray ray = camera_.pixel_ray(tile.x0 + r % tw, tile.y0 + r / tw);
       ++tot.stats.rays;
-      double t_near, t_far;
-      if (intersect_box(ray.origin, ray.dir, aabb_, t_near, t_far) && t_far >= 0) ++tot.stats.rays_hit_aabb;
       const Vec3f d = ray.dir.cast<float>();
       w.dx[r] = d.x;
       w.dy[r] = d.y;
       w.dz[r] = d.z;
-      w.marchers.emplace_back(m_, skip_, ray, make_micro_ray(m_, ray, delta_));
+      const FastMarcher& fm = w.marchers.emplace_back(m_, skip_, ray, make_micro_ray(m_, ray, delta_));
+      // A ray that meets the AABB has candidates in the region around it.
+      double t_near, t_far;
+      if (!fm.empty() && intersect_box(ray.origin, ray.dir, aabb_, t_near, t_far) && t_far >= 0)
+        ++tot.stats.rays_hit_aabb;
       w.T[r] = 1.f;
       w.rgb[r][0] = w.rgb[r][1] = w.rgb[r][2] = 0.f;
-      w.open[r] = true;
+      w.open[r] = !fm.empty();  // a ray without candidates keeps the background
       w.exhausted[r] = false;
+      if (w.open[r]) w.active[n_active++] = r;
     }
     bool encoded = false;
     double traversal = 0, compositing = 0;
     FastKernelSeconds kernel;
     for (int round = 0, per_ray = kFirstRoundSamples;; ++round, per_ray = std::min(2 * per_ray, kMaxRoundSamples)) {
       // Traversal: each open ray's next samples, contiguous per ray.
+      if (n_active == 0) break;
       w.samples.clear();
-      bool any = false;
-      int group[kFastMarchGroup], g = 0;
-      for (int r = 0; r < n; ++r) {
+      // Rays already dimmed below kDimTransmittance ask for fewer samples.
+      int group[2][kFastMarchGroup], g[2] = {0, 0};
+      const int limit[2] = {per_ray, std::min(per_ray, kDimRoundSamples)};
+      for (int a = 0; a < n_active; ++a) {
+        const int r = w.active[a];
         w.begin[r] = w.end[r] = 0;
-        if (!w.open[r]) continue;
-        any = true;
-        group[g++] = r;
-        if (g == kFastMarchGroup) {
-          gather(w, group, g, per_ray, tot);
-          g = 0;
+        const int c = w.T[r] < kDimTransmittance ? 1 : 0;
+        group[c][g[c]++] = r;
+        if (g[c] == kFastMarchGroup) {
+          gather(w, group[c], g[c], limit[c], tot);
+          g[c] = 0;
         }
       }
-      if (g > 0) gather(w, group, g, per_ray, tot);
-      if (!any) break;
+      for (int c = 0; c < 2; ++c)
+        if (g[c] > 0) gather(w, group[c], g[c], limit[c], tot);
       if (profile_) traversal += since(t);
       if (!w.samples.empty()) {
         if (!encoded && fm_.dir_dims > 0) {
@@ -151,9 +211,10 @@ class TileRenderer {
         tot.profile.mlp_samples += w.samples.size();
         if (profile_) t = Clock::now();
       }
-      // Compositing, each ray in sample order.
-      for (int r = 0; r < n; ++r) {
-        if (!w.open[r]) continue;
+      // Compositing, each ray in sample order; the rays that stay open.
+      int still_open = 0;
+      for (int a = 0; a < n_active; ++a) {
+        const int r = w.active[a];
         if (w.exhausted[r]) w.open[r] = false;
         float T = w.T[r];
         for (uint32_t i = w.begin[r]; i < w.end[r] && T >= s_.transmittance_min; ++i) {
@@ -165,7 +226,9 @@ class TileRenderer {
         }
         w.T[r] = T;
         if (T < s_.transmittance_min) w.open[r] = false;
+        if (w.open[r]) w.active[still_open++] = r;
       }
+      n_active = still_open;
       if (profile_) compositing += since(t);
     }
     for (int r = 0; r < n; ++r) {

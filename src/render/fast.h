@@ -5,10 +5,13 @@
 // only the order of the work changes:
 //   - the image is cut into 16x16-pixel tiles visited in Z (Morton) order and
 //     shared among threads (OpenMP, dynamic); a tile's 256 rays are a packet;
+//   - a tile whose rays all miss the region around the object (a test of the
+//     tile's view cone against the box) is filled with the background;
 //   - each ray of the packet marches inside the object AABB (FastMarcher,
 //     render/fast_march.h: a distance field over the fine tier for empty
-//     space, then the leaf and micro bitmaps) and hands over its next few
-//     samples;
+//     space, then SIMD vectors of consecutive candidates tested against the
+//     fine voxels' micro masks) and hands over its next few samples (fewer
+//     once its transmittance has dropped);
 //   - the packet's samples are grouped by coarse voxel, and each group runs
 //     through that CV's MLP as a small matrix product per layer over SIMD
 //     vectors of samples (render/fast_kernels.h), features read from the

@@ -32,6 +32,11 @@ constexpr size_t kCap = HWY_MAX_BYTES / sizeof(float);
 // (0, 0, 0), in the reference's corner order (x fastest).
 constexpr uint32_t kCornerVertex[8] = {0, 1, 5, 6, 25, 26, 30, 31};
 
+// Int8: samples are run in segments of at most this many, whose rays' direction
+// parts are computed once per ray (slot) before the samples' chunks.
+constexpr size_t kSegment = 256;
+constexpr size_t kDirRow = kSegment + kCap;  // a row of dir_q: a vector load from any slot stays inside
+
 // Per-chunk scratch: activations of one vector of samples, row r of a buffer
 // at [r * N, r * N + N).
 struct Scratch {
@@ -43,8 +48,16 @@ struct Scratch {
   alignas(64) uint32_t words[8 * kCap];
   alignas(64) float fx[kCap], fy[kCap], fz[kCap];
   alignas(64) float out[5 * kCap];
-  uint32_t vertex[kCap];
-  uint32_t ray[kCap];
+  alignas(64) uint32_t vertex[kCap];
+  alignas(64) uint32_t ray[kCap];
+  // Int8: the sample's ray slot in dir_q is slot_base + slot[l]. A new slot
+  // starts at each change of ray along the batch, so the lanes of a vector
+  // span fewer slots than there are lanes.
+  alignas(64) int32_t slot[kCap];
+  int32_t slot_base = 0;
+  // Int8: the direction part of the colour net's first layer per ray of a
+  // segment, in accumulator units: output o of slot j at dir_q[o * kDirRow + j].
+  alignas(64) float dir_q[kFastMaxWidth * kDirRow];
 };
 
 // ACC rows [o, o + NB) = (B ? bias : 0) + W[o.., i0..i1) X[i0..i1), one
@@ -94,15 +107,18 @@ void InterpolateQ4(DF d, size_t N, const FastModel& fm, Scratch& s, const float*
   const VF wx[2] = {hn::Sub(one, fx), fx}, wy[2] = {hn::Sub(one, fy), fy}, wz[2] = {hn::Sub(one, fz), fz};
   VF w[8];
   for (int j = 0; j < 8; ++j) w[j] = hn::Mul(hn::Mul(wx[j & 1], wy[(j >> 1) & 1]), wz[j >> 2]);
-  const uint8_t* q4 = fm.model->features_q4.data();
+  // The codes as 32-bit words (8 channels each): F / 8 words per vertex,
+  // gathered per corner (the feature array starts on an allocation boundary).
+  const uint32_t* q4 = reinterpret_cast<const uint32_t*>(fm.model->features_q4.data());
   const int F = fm.feature_channels;
-  const size_t vertex_bytes = size_t(F) / 2;
+  const int32_t vertex_words = F / 8;
+  const auto vertex = hn::Mul(hn::BitCast(di, hn::Load(du, s.vertex)), hn::Set(di, vertex_words));
   const auto mask = hn::Set(du, 15u);
   for (int g = 0; g < F / 8; ++g) {
-    for (size_t l = 0; l < N; ++l)
-      for (int j = 0; j < 8; ++j)
-        std::memcpy(&s.words[size_t(j) * N + l], q4 + (size_t(s.vertex[l]) + kCornerVertex[j]) * vertex_bytes + 4 * g,
-                    4);
+    for (int j = 0; j < 8; ++j) {
+      const auto idx = hn::Add(vertex, hn::Set(di, int32_t(kCornerVertex[j]) * vertex_words + g));
+      hn::Store(hn::GatherIndex(du, q4, idx), du, s.words + size_t(j) * N);
+    }
     const int c0 = 8 * g;
     VF acc[8];
     VF zp[8], scale[8];
@@ -172,24 +188,28 @@ void Requantize(DF d, size_t N, float* rows, int count, const float* mult, bool 
 }
 
 // A net's layers from `in` into `last` (rows of the last layer's output),
-// hidden layers through a and b. Int8 with split >= 0: the inputs from split
-// on (the direction) are summed apart in `part` and brought to accumulator
-// units with the multiplier dir_in before the bias and the other products.
+// hidden layers through a and b. Int8 with split >= 0: the first layer's
+// products of the inputs from split on (the direction) are not summed here but
+// read from dir_q (DirectionParts) at each sample's slot.
 template <bool kInt8>
 void RunNet(DF d, size_t N, const std::vector<FastLayer>& net, const float* p, const float* in, float* a, float* b,
-            float* last, int split, float dir_in, float* part) {
+            float* last, int split, const float* dir_q, const int32_t* slots) {
+  // Int8, split >= 0: dir_q points at the chunk's first slot, slots holds the
+  // lanes' slots relative to it (each below the lane count).
   const float* x = in;
   for (size_t l = 0; l < net.size(); ++l) {
     const FastLayer& L = net[l];
     const bool hidden = l + 1 < net.size();
     float* y = !hidden ? last : (x == a ? b : a);
     if (kInt8 && l == 0 && split >= 0) {
+      // The inputs before `split` here; those from it on (the direction)
+      // were summed per ray (DirectionParts): added by the sample's slot.
       Dense<true>(d, N, x, L.in, 0, split, p + L.w, p + L.b, L.out, y);
-      Dense<true>(d, N, x, L.in, split, L.in, p + L.w, nullptr, L.out, part);
-      const VF m = hn::Set(d, dir_in);
+      const hn::RebindToSigned<DF> di;
+      const auto lanes = hn::IndicesFromVec(d, hn::Load(di, slots));
       for (int o = 0; o < L.out; ++o) {
         float* r = y + size_t(o) * N;
-        const VF q = hn::Round(hn::Mul(hn::Load(d, part + size_t(o) * N), m));
+        const VF q = hn::TableLookupLanes(hn::LoadU(d, dir_q + size_t(o) * kDirRow), lanes);
         hn::Store(hn::Add(hn::Load(d, r), q), d, r);
       }
     } else {
@@ -210,6 +230,34 @@ void RunNet(DF d, size_t N, const std::vector<FastLayer>& net, const float* p, c
   }
 }
 
+// Rows [G, G + D) of X: direction value k of ray rays[l] in lane l.
+void GatherDirections(DF d, size_t N, const float* dir, size_t ray_stride, const uint32_t* rays, int G, int D,
+                      float* X) {
+  const hn::RebindToSigned<DF> di;
+  const auto ray = hn::BitCast(di, hn::Load(hn::RebindToUnsigned<DF>(), rays));
+  for (int k = 0; k < D; ++k)
+    hn::Store(hn::GatherIndex(d, dir + size_t(k) * ray_stride, ray), d, X + size_t(G + k) * N);
+}
+
+// Int8: dir_q for `count` rays (slots 0..count-1, ray of slot j: rays[j]):
+// the colour net's first-layer products of the direction inputs, summed in
+// input order, brought to accumulator units with the multiplier dir_in and
+// rounded (as the chip adds them to the other products).
+void DirectionParts(DF d, size_t N, const FastModel& fm, const float* p, const float* dir, size_t ray_stride,
+                    const uint32_t* rays, size_t count, Scratch& s) {
+  const FastLayer& L = fm.color.front();
+  const int G = fm.geo_width, D = fm.dir_dims;
+  const VF m = hn::Set(d, p[fm.dir_in]);
+  alignas(64) uint32_t lane_rays[kCap];
+  for (size_t j0 = 0; j0 < count; j0 += N) {
+    for (size_t l = 0; l < N; ++l) lane_rays[l] = rays[std::min(j0 + l, count - 1)];
+    GatherDirections(d, N, dir, ray_stride, lane_rays, G, D, s.cin);
+    Dense<true>(d, N, s.cin, L.in, G, L.in, p + L.w, nullptr, L.out, s.split);
+    for (int o = 0; o < L.out; ++o)
+      hn::Store(hn::Round(hn::Mul(hn::Load(d, s.split + size_t(o) * N), m)), d, s.dir_q + size_t(o) * kDirRow + j0);
+  }
+}
+
 VF Sigmoid(DF d, VF x) {
   const VF one = hn::Set(d, 1.f);
   return hn::Div(one, hn::Add(one, hn::Exp(d, hn::Neg(x))));
@@ -221,7 +269,7 @@ void EvalChunk(DF d, size_t N, const FastModel& fm, const float* p, const float*
   Clock::time_point t0;
   if (seconds) t0 = Clock::now();
   const int F = fm.feature_channels, G = fm.geo_width, D = fm.dir_dims;
-  if (fm.form.quantized_features && F % 8 == 0) {
+  if (fm.form.quantized_features && F % 8 == 0 && fm.model->features_q4.size() < (size_t(1) << 31)) {
     InterpolateQ4<kInt8>(d, N, fm, s, p + fm.feature_in, s.a);
   } else {
     InterpolateScalar(N, fm, s, s.a);
@@ -234,7 +282,7 @@ void EvalChunk(DF d, size_t N, const FastModel& fm, const float* p, const float*
   }
 
   // Density net: its G outputs land in the first rows of the colour input.
-  RunNet<kInt8>(d, N, fm.density, p, s.a, s.a, s.b, s.cin, -1, 0.f, nullptr);
+  RunNet<kInt8>(d, N, fm.density, p, s.a, s.a, s.b, s.cin, -1, nullptr, nullptr);
   VF raw = hn::Load(d, s.cin);
   if (kInt8) {
     raw = hn::Mul(raw, hn::Set(d, 1.f / 256.f));
@@ -246,13 +294,9 @@ void EvalChunk(DF d, size_t N, const FastModel& fm, const float* p, const float*
   const VF trans = kInt8 ? hn::Sub(hn::Set(d, 1.f), alpha) : hn::Exp(d, hn::Neg(tau));
   hn::Store(alpha, d, s.out);
   hn::Store(trans, d, s.out + N);
-  // The rays' direction inputs after the density outputs.
-  for (int k = 0; k < D; ++k) {
-    const float* row = dir + size_t(k) * ray_stride;
-    float* dst = s.cin + size_t(G + k) * N;
-    for (size_t l = 0; l < N; ++l) dst[l] = row[s.ray[l]];
-  }
-  RunNet<kInt8>(d, N, fm.color, p, s.cin, s.a, s.b, s.rgb, kInt8 ? G : -1, kInt8 ? p[fm.dir_in] : 0.f, s.split);
+  // Float: the rays' direction inputs after the density outputs (Int8: in dir_q).
+  if (!kInt8) GatherDirections(d, N, dir, ray_stride, s.ray, G, D, s.cin);
+  RunNet<kInt8>(d, N, fm.color, p, s.cin, s.a, s.b, s.rgb, kInt8 && D > 0 ? G : -1, s.dir_q + s.slot_base, s.slot);
   for (int c = 0; c < 3; ++c) {
     VF v = hn::Load(d, s.rgb + size_t(c) * N);
     if (kInt8) v = hn::Mul(v, hn::Set(d, 1.f / 256.f));
@@ -268,16 +312,36 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, con
   Scratch s;
   const float* p = fm.mlp(mlp);
   const bool int8 = fm.arithmetic == FastArithmetic::Int8;
+  // Int8: per segment, the rays met (a new slot at each change of ray: a
+  // ray's samples are consecutive) and their direction parts.
+  alignas(64) uint32_t seg_rays[kSegment];
+  alignas(64) int32_t seg_slot[kSegment + kCap];
+  size_t seg_begin = 0, seg_end = 0;
   for (size_t i0 = 0; i0 < n; i0 += N) {
     const size_t valid = std::min(N, n - i0);
+    if (int8 && fm.dir_dims > 0 && i0 >= seg_end) {
+      seg_begin = i0;
+      seg_end = std::min(n, i0 + kSegment);  // kSegment is a multiple of N: chunks do not cross segments
+      size_t slots = 0;
+      for (size_t i = i0; i < seg_end; ++i) {
+        const uint32_t ray = samples[order[i]].ray;
+        if (slots == 0 || seg_rays[slots - 1] != ray) seg_rays[slots++] = ray;
+        seg_slot[i - i0] = int32_t(slots - 1);
+      }
+      DirectionParts(d, N, fm, p, dir, ray_stride, seg_rays, slots, s);
+    }
     for (size_t l = 0; l < N; ++l) {
-      const FastSample& x = samples[order[i0 + std::min(l, valid - 1)]];  // the tail repeats the last sample
+      const size_t i = i0 + std::min(l, valid - 1);  // the tail repeats the last sample
+      const FastSample& x = samples[order[i]];
       s.fx[l] = x.fx;
       s.fy[l] = x.fy;
       s.fz[l] = x.fz;
       s.vertex[l] = x.vertex;
       s.ray[l] = x.ray;
+      s.slot[l] = int8 ? seg_slot[i - seg_begin] : 0;
     }
+    s.slot_base = s.slot[0];
+    for (size_t l = 0; l < N; ++l) s.slot[l] -= s.slot_base;
     if (int8)
       EvalChunk<true>(d, N, fm, p, dir, ray_stride, delta, s, seconds);
     else

@@ -5,15 +5,15 @@
 //
 //   - Empty fine voxels are skipped a cube at a time: FastSkipGrid holds, per
 //     fine voxel, its Chebyshev distance (in fine voxels, capped) to the
-//     nearest occupied one, so a ray at an empty fine voxel at distance r
+//     nearest occupied one, so a ray at an empty fine voxel at distance r >= 3
 //     jumps past the cube of (2r - 1)^3 fine voxels around it, all empty. This
 //     stands in for the coarse and fine tiers (a coarse cell is empty iff its
 //     fine voxels are), with fewer steps through large empty regions.
-//   - Inside an occupied fine voxel the leaf and micro tiers are read from a
-//     64-bit mask of its 4x4x4 micro voxels (8 bytes per block, the chip's
-//     micro-grid bitmap), loaded once when the ray enters the fine voxel, so
-//     these checks are register bit tests instead of reads of the 2 MiB
-//     micro bitmap.
+//   - From a candidate at distance 2 or less on, a SIMD vector of consecutive
+//     candidates (16 with AVX-512) is tested at once: points, micro voxels
+//     and one gather from 64-bit masks of the fine voxels' 4x4x4 micro voxels
+//     (the leaf and micro tiers in one bit), with no branch per candidate.
+//     The samples found are handed out in order.
 //   - A jump goes to the last candidate whose exact ray point is still a
 //     margin inside the empty box (exit distance from the ray's inverse
 //     direction). The margin bounds the rounding error of the float points
@@ -31,17 +31,20 @@
 
 namespace edrnr {
 
-// Chebyshev distances of the fine voxels to the nearest occupied fine voxel.
+// Chebyshev distances of the fine voxels to the nearest occupied one, and
+// the micro occupancy of every fine voxel as a 64-bit mask.
 struct FastSkipGrid {
   static constexpr int kMaxDistance = 15;  // cap, fine voxels
   int res = 0;                             // fine resolution
   Box3d region;  // scene units: the object AABB's micro voxels widened by one, where candidates are considered
   std::vector<uint8_t> distance;  // 0: occupied; r: every fine voxel within r - 1 is empty
-  // Per feature block: bit lx + 4 ly + 16 lz set iff micro voxel (lx, ly, lz)
-  // of its fine voxel is occupied.
-  std::vector<uint64_t> micro_mask;
+  // Per fine voxel f (linear index x + res (y + res z)) two 32-bit words:
+  // bit lx + 4 ly + 16 (lz & 1) of word 2 f + (lz >> 1) is set iff micro
+  // voxel (lx, ly, lz) of it is occupied (the 64-bit mask of its 4x4x4 micro
+  // voxels, low half first).
+  std::vector<uint32_t> fine_words;
 
-  // Built from the fine tier of a model (check_structure()d).
+  // Built from the fine and micro tiers of a model (check_structure()d).
   explicit FastSkipGrid(const SceneModel& model);
   FastSkipGrid() = default;
   uint8_t at(int x, int y, int z) const { return distance[size_t(x) + size_t(res) * (size_t(y) + size_t(res) * z)]; }
@@ -53,54 +56,58 @@ class FastMarcher {
 
   // The next sample; false once the ray has no more.
   bool next(MarchSample& s);
-  // One candidate of the march: End (no more), Sample (s filled) or More.
-  enum class Step { More, Sample, End };
-  Step step(MarchSample& s);
-  // Bitmap and distance lookups so far.
-  uint64_t occupancy_checks() const { return checks_; }
+  // Distance lookups plus candidates tested against the micro masks, so far.
+  uint64_t occupancy_checks() const { return st_.checks; }
+  // Whether the ray has no candidates at all (it misses the region, or the
+  // region lies behind it); known from construction on.
+  bool empty() const { return st_.k_end < st_.k && st_.pending == 0; }
   // The feature block of the last sample's fine voxel (-1: none; the model
   // then breaks its invariants).
-  int32_t block() const { return block_; }
+  int32_t block() const { return st_.block; }
+
+  // What the march kernel (fast_march_group) reads and advances; no other
+  // code touches it.
+  struct State {
+    const SceneModel* model = nullptr;
+    const FastSkipGrid* skip = nullptr;
+    MicroRay ray;
+    // skip_box's terms per axis: the exit face (0 or 1), 1 / (d_a delta) and
+    // (-/+ margin - o_a) / (d_a delta) - 0.5.
+    double exit[3] = {0, 0, 0}, scale[3] = {0, 0, 0}, offset[3] = {0, 0, 0};
+    int64_t k = 0, k_end = -1;  // next candidate to consider; the last one
+    int64_t chunk_k = 0;        // first candidate of the last chunk tested
+    uint32_t pending = 0;       // its samples not handed out yet: bit i for candidate chunk_k + i
+    uint64_t checks = 0;
+    int32_t block = -1;
+
+    // A candidate after k (whose point lies in the box of `size` micro
+    // voxels from micro voxel `lo`) such that every candidate between them
+    // lies in the box: the last one whose exact ray point is at least the
+    // margin inside it.
+    int64_t skip_box(int64_t k0, const Vec3i& lo, int size) const {
+      // x_a: the candidate position j (t = (j + 0.5) delta) at which the
+      // exact line o_m + d_m t is the margin inside the box's exit face on
+      // axis a; exit[a] selects the face (1: lo + size, 0: lo); axes the ray
+      // does not move along give +inf (scale 0, offset +inf). Candidates up
+      // to min_a x_a have float points in the box (their rounding error is
+      // below the margin), those from k0 on entered it already (each
+      // coordinate is monotone in k), so all of them can be skipped without
+      // computing one.
+      const double x0 = (double(lo.x) + double(size) * exit[0]) * scale[0] + offset[0];
+      const double x1 = (double(lo.y) + double(size) * exit[1]) * scale[1] + offset[1];
+      const double x2 = (double(lo.z) + double(size) * exit[2]) * scale[2] + offset[2];
+      const double x = std::min(x0, std::min(x1, x2));  // candidates j <= x are inside
+      if (!(x < double(k_end))) return k_end + 1;
+      const double xc = std::max(x, -4e18);
+      const int64_t t = int64_t(xc);                        // toward zero
+      const int64_t floor_x = t - int64_t(xc < double(t));  // floor
+      return std::max(k0 + 1, floor_x + 1);
+    }
+  };
+  State& state() { return st_; }
 
  private:
-  // The micro mask of an occupied fine voxel read from the micro bitmap
-  // (for fine voxels without a feature block).
-  uint64_t mask_from_bitmap(const Vec3i& fine) const;
-  // A candidate after k (whose point lies in the box of `size` micro voxels
-  // from micro voxel `lo`) such that every candidate between them lies in the
-  // box: the last one whose exact ray point is at least margin_ inside it.
-  int64_t skip_box(int64_t k, const Vec3i& lo, int size) const {
-    // x_a: the candidate position j (t = (j + 0.5) delta) at which the exact
-    // line o_m + d_m t is margin_ inside the box's exit face on axis a;
-    // exit_[a] selects the face (1: lo + size, 0: lo); axes the ray does not
-    // move along give +inf (scale_ 0, offset_ +inf). Candidates up to min_a
-    // x_a have float points in the box (their rounding error is below
-    // margin_), those from k on entered it already (each coordinate is
-    // monotone in k), so all of them can be skipped without computing one.
-    const double x0 = (double(lo.x) + double(size) * exit_[0]) * scale_[0] + offset_[0];
-    const double x1 = (double(lo.y) + double(size) * exit_[1]) * scale_[1] + offset_[1];
-    const double x2 = (double(lo.z) + double(size) * exit_[2]) * scale_[2] + offset_[2];
-    const double x = std::min(x0, std::min(x1, x2));  // candidates j <= x are inside
-    if (!(x < double(k_end_))) return k_end_ + 1;
-    const double xc = std::max(x, -4e18);
-    const int64_t t = int64_t(xc);                        // toward zero
-    const int64_t floor_x = t - int64_t(xc < double(t));  // floor
-    return std::max(k + 1, floor_x + 1);
-  }
-
-  const SceneModel* model_;
-  const FastSkipGrid* skip_;
-  MicroRay ray_;
-  // skip_box's terms per axis: the exit face (0 or 1), 1 / (d_a delta) and
-  // (-/+ margin - o_a) / (d_a delta) - 0.5.
-  double exit_[3] = {0, 0, 0}, scale_[3] = {0, 0, 0}, offset_[3] = {0, 0, 0};
-  double margin_ = 0;        // micro units: well above the rounding error of a candidate's float point
-  bool small_step_ = false;  // empty leaf cells and micro voxels are passed by stepping
-  int64_t k_ = 0, k_end_ = -1;
-  uint64_t checks_ = 0;
-  Vec3i fine_{-1, -1, -1};  // the occupied fine voxel the ray is in
-  int32_t block_ = -1;      // its block
-  uint64_t mask_ = 0;       // its micro mask
+  State st_;
 };
 
 // The most marchers fast_march_group advances together.
@@ -109,7 +116,10 @@ inline constexpr int kFastMarchGroup = 4;
 // Advances marchers[i], i < n <= kFastMarchGroup, with their iterations
 // interleaved, until each has `limit` more samples or has ended: sample j of
 // marcher i (and its block()) goes to samples[i * limit + j] (blocks[...]),
-// counts[i] says how many, ended[i] whether its march ended.
+// counts[i] says how many, ended[i] whether its march has ended (no samples
+// left). SIMD (render/fast_march_kernels.cpp): empty fine voxels are skipped
+// by the distance field; from a candidate in an occupied fine voxel on, a
+// vector of consecutive candidates is tested against the micro masks at once.
 void fast_march_group(FastMarcher* const* marchers, int n, int limit, MarchSample* samples, int32_t* blocks,
                       int* counts, bool* ended);
 

@@ -88,6 +88,64 @@ TEST(Fast, MarchYieldsTheReferenceSamples) {
   }
 }
 
+// The renderer's grouped march (four rays interleaved, a few samples per
+// call, samples held over between calls) yields the reference samples too.
+TEST(Fast, GroupedMarchYieldsTheReferenceSamples) {
+  const SceneModel m = several_model(128, false);
+  const FastSkipGrid skip(m);
+  const float delta = sample_spacing(m, 1.f);
+  const Camera cam = views(29, 23)[1];
+  size_t total = 0;
+  for (int limit : {1, 3, 8}) {
+    for (int y = 0; y < cam.height; ++y)
+      for (int x0 = 0; x0 < cam.width; x0 += kFastMarchGroup) {
+        const int n = std::min(kFastMarchGroup, cam.width - x0);
+        std::vector<FastMarcher> fast;
+        std::vector<std::vector<MarchSample>> want(static_cast<size_t>(n)), got(static_cast<size_t>(n));
+        for (int i = 0; i < n; ++i) {
+          const Ray ray = cam.pixel_ray(x0 + i, y);
+          const MicroRay mr = make_micro_ray(m, ray, delta);
+          SampleMarcher ref(m, ray, mr, true);
+          MarchSample a;
+          while (ref.next(a)) want[size_t(i)].push_back(a);
+          fast.emplace_back(m, skip, ray, mr);
+        }
+        std::vector<FastMarcher*> ptrs;
+        for (FastMarcher& f : fast) ptrs.push_back(&f);
+        std::vector<MarchSample> samples(size_t(kFastMarchGroup * limit));
+        std::vector<int32_t> blocks(samples.size());
+        int counts[kFastMarchGroup];
+        bool ended[kFastMarchGroup] = {false, false, false, false};
+        for (int call = 0; call < 10000; ++call) {
+          fast_march_group(ptrs.data(), n, limit, samples.data(), blocks.data(), counts, ended);
+          bool all = true;
+          for (int i = 0; i < n; ++i) {
+            ASSERT_LE(counts[i], limit);
+            for (int j = 0; j < counts[i]; ++j) {
+              const MarchSample& s = samples[size_t(i * limit + j)];
+              const Vec3i& v = s.voxel;
+              EXPECT_EQ(blocks[size_t(i * limit + j)],
+                        m.fine_to_block[linear_index(v.x / 4, v.y / 4, v.z / 4, m.fine_res())]);
+              got[size_t(i)].push_back(s);
+            }
+            all = all && (ended[i] || counts[i] == 0);
+          }
+          if (all) break;
+        }
+        for (int i = 0; i < n; ++i) {
+          ASSERT_EQ(got[size_t(i)].size(), want[size_t(i)].size()) << limit << " " << x0 + i << "," << y;
+          for (size_t j = 0; j < want[size_t(i)].size(); ++j) {
+            EXPECT_EQ(got[size_t(i)][j].k, want[size_t(i)][j].k);
+            EXPECT_EQ(got[size_t(i)][j].voxel, want[size_t(i)][j].voxel);
+            EXPECT_EQ(got[size_t(i)][j].p_micro, want[size_t(i)][j].p_micro);
+          }
+          total += want[size_t(i)].size();
+        }
+      }
+  }
+  EXPECT_GT(total, 300u);
+}
+
 TEST(Fast, SkipGridHoldsChebyshevDistances) {
   const SceneModel m = several_model(64, false);
   const FastSkipGrid g(m);
@@ -105,6 +163,20 @@ TEST(Fast, SkipGridHoldsChebyshevDistances) {
         }
         ASSERT_EQ(int(g.at(x, y, z)), best) << x << "," << y << "," << z;
       }
+  // The micro masks of the fine voxels hold the micro bitmap.
+  const Bitmap3& micro = m.occupancy[int(Tier::Micro)];
+  ASSERT_EQ(g.fine_words.size(), size_t(2) * r * r * r);
+  size_t occupied = 0;
+  for (int z = 0; z < m.micro_res; ++z)
+    for (int y = 0; y < m.micro_res; ++y)
+      for (int x = 0; x < m.micro_res; ++x) {
+        const size_t f = size_t(x / 4) + size_t(r) * (size_t(y / 4) + size_t(r) * size_t(z / 4));
+        const uint32_t word = g.fine_words[2 * f + size_t((z & 3) >> 1)];
+        const bool bit = (word >> ((x & 3) + 4 * (y & 3) + 16 * (z & 1))) & 1u;
+        ASSERT_EQ(bit, micro.get(x, y, z)) << x << "," << y << "," << z;
+        occupied += bit;
+      }
+  EXPECT_GT(occupied, 100u);
 }
 
 TEST(Fast, FloatPathMatchesTheReferenceAtOtherSettings) {
@@ -121,6 +193,28 @@ TEST(Fast, FloatPathMatchesTheReferenceAtOtherSettings) {
     const Image ref = render_reference(m, cam, s, &rs);
     EXPECT_GE(psnr(fast.render(cam, s, &fs), ref), 50.0);
     EXPECT_EQ(fs.samples, rs.samples);
+  }
+}
+
+// A small object in a large image: most tiles see none of it and are
+// filled with the background without marching; the image and the counts
+// still match the reference.
+TEST(Fast, TilesAwayFromTheObjectMatchTheReference) {
+  const SceneModel m = several_model(64);
+  const FastRenderer fast(m, ModelForm::Auto, FastPath::Float);
+  RenderSettings s;
+  s.background[0] = 0.3f;
+  for (const Camera& cam : {orbit_camera(150, 130, 20, 25, 14, 40), orbit_camera(97, 160, 250, -35, 11, 50)}) {
+    RenderStats rs, fs;
+    const Image ref = render_reference(m, cam, s, &rs);
+    const Image img = fast.render(cam, s, &fs);
+    EXPECT_GE(psnr(img, ref), 50.0);
+    EXPECT_EQ(fs.rays, rs.rays);
+    EXPECT_EQ(fs.rays_hit_aabb, rs.rays_hit_aabb);
+    EXPECT_EQ(fs.samples, rs.samples);
+    EXPECT_GT(fs.samples, 100u);
+    EXPECT_LT(fs.rays_hit_aabb * 4, fs.rays);  // the object covers a small part of the image
+    EXPECT_EQ(img.at(0, 0)[0], s.background[0]);
   }
 }
 
