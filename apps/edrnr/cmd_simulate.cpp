@@ -135,12 +135,13 @@ View pick_view(const SimulateOptions& o, const ChipConfig& chip) {
   if (factor < 1 || (fw >= 0 && fh >= 0 && fw != fh))
     fail("--width/--height: the dataset's {}x{} views scale down by whole factors only (e.g. {}x{})", full.width,
          full.height, full.width / 2, full.height / 2);
-  d.load_images = true;
-  d.downscale = factor;
-  for (int c = 0; c < 3; ++c) d.background[c] = chip.background[c];
-  Dataset ds = load_dataset(o.dataset, d);
-  v.camera = ds.frames[size_t(o.view)].camera;
-  v.ground_truth = std::move(ds.frames[size_t(o.view)].image);
+  // Only this view's image is decoded (as load_dataset would give it).
+  Frame frame = cams.frames[size_t(o.view)];
+  frame.camera = full.downscaled(factor);
+  float background[3];
+  for (int c = 0; c < 3; ++c) background[c] = chip.background[c];
+  v.camera = frame.camera;
+  v.ground_truth = downscale(composite_rgba(read_frame_rgba(frame, factor), background), factor);
   return v;
 }
 

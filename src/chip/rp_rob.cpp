@@ -35,6 +35,10 @@ void RpRob::note_recent(uint32_t tag) {
 bool RpRob::in_recent(uint32_t tag) const { return std::find(recent_.begin(), recent_.end(), tag) != recent_.end(); }
 
 bool RpRob::insert(uint32_t rp, uint32_t tag) {
+  if (refused_version_ == version_ && refused_rp_ == rp && refused_tag_ == tag) {
+    ++counters_.insert_refusals;  // nothing changed since the same insert was refused
+    return false;
+  }
   if (where_.count(rp)) throw std::logic_error("RP-ROB insert: RP " + std::to_string(rp) + " is already held");
   int chosen = -1;
   if (config_.reorder) {
@@ -54,8 +58,12 @@ bool RpRob::insert(uint32_t rp, uint32_t tag) {
   }
   if (chosen < 0) {
     ++counters_.insert_refusals;
+    refused_version_ = version_;
+    refused_rp_ = rp;
+    refused_tag_ = tag;
     return false;
   }
+  ++version_;
   Entry& en = entries_[size_t(chosen)];
   if (en.count == 0) en.tag = tag;
   ++en.count;
@@ -70,6 +78,7 @@ bool RpRob::insert(uint32_t rp, uint32_t tag) {
 }
 
 ScheduledRp RpRob::pop(int e) {
+  ++version_;
   Entry& en = entries_[size_t(e)];
   Ready r = en.ready.front();
   en.ready.pop_front();
@@ -82,6 +91,13 @@ ScheduledRp RpRob::pop(int e) {
 }
 
 std::optional<ScheduledRp> RpRob::schedule() {
+  if (nothing_version_ == version_) return std::nullopt;  // nothing changed since the last empty answer
+  const std::optional<ScheduledRp> s = schedule_scan();
+  if (!s) nothing_version_ = version_;
+  return s;
+}
+
+std::optional<ScheduledRp> RpRob::schedule_scan() {
   if (!config_.reorder) {
     int best = -1;
     for (int e = 0; e < entries(); ++e) {
@@ -143,6 +159,7 @@ void RpRob::reschedule(uint32_t rp) {
   Place& p = in_flight_place(rp, "reschedule");
   p.in_flight = false;
   entries_[size_t(p.entry)].ready.push_back({rp, p.tag, stamp_++});
+  ++version_;
   ++counters_.reschedules;
 }
 
@@ -151,6 +168,7 @@ void RpRob::retire(uint32_t rp) {
   Entry& en = entries_[size_t(p.entry)];
   --en.count;
   where_.erase(rp);
+  ++version_;
   ++counters_.retires;
 }
 

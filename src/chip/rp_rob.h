@@ -130,6 +130,7 @@ class RpRob {
   void note_recent(uint32_t tag);
   bool in_recent(uint32_t tag) const;
   ScheduledRp pop(int e);
+  std::optional<ScheduledRp> schedule_scan();  // schedule() without the memo
   Place& in_flight_place(uint32_t rp, const char* op);
 
   RpRobConfig config_;
@@ -138,6 +139,14 @@ class RpRob {
   std::deque<uint32_t> recent_;
   bool has_current_ = false;
   uint32_t current_ = 0;
+  // Every change of the entries, the recorder or the current tag bumps
+  // version_. A refused insert, or a schedule() with nothing to give, is
+  // answered the same way while the version stays (the CTU and the FTU ask
+  // again every cycle they wait), without scanning the entries again.
+  uint64_t version_ = 0;
+  uint64_t refused_version_ = ~uint64_t(0);  // insert(refused_rp_, refused_tag_) was refused then
+  uint32_t refused_rp_ = 0, refused_tag_ = 0;
+  uint64_t nothing_version_ = ~uint64_t(0);  // schedule() had nothing to give then
   bool has_last_scheduled_ = false;
   uint32_t last_scheduled_ = 0;
   uint64_t stamp_ = 0;

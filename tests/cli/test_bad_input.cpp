@@ -92,8 +92,9 @@ const BadInput kCases[] = {
   {"DatasetNoFrames", "eval {D}/m.edrnr {D}/noframes", 1, "'frames' is empty"},
   {"DatasetHugeSize", "eval {D}/m.edrnr {D}/hugesize", 1, "'w' must be an integer from 1 to 16384, got 30000"},
   {"DatasetTooManyPixels", "eval {D}/m.edrnr {D}/manypixels", 1, "over the limit of 16777216 pixels per image"},
-  {"DatasetSplitTooLarge", "simulate {D}/m.edrnr -q --dataset {D}/bigsplit --width 8", 1,
-   "over the limit of 268435456 pixels for one split"},
+  // simulate decodes only the chosen view (the split limit: tests/data/test_split_limit.cpp)
+  {"SimulateViewImageMissing", "simulate {D}/m.edrnr -q --dataset {D}/bigsplit --width 8", 1,
+   "bigsplit/test/r_0.png'"},
   {"PngClaimsHugeSize", "eval {D}/m.edrnr {D}/hugepng", 1, "30000x30000: each side must be 1..16384 pixels"},
   {"PngCorrupt", "eval {D}/m.edrnr {D}/corruptpng", 1, "r_0.png' is not a valid PNG"},
   {"PngMissing", "eval {D}/m.edrnr {D}/missingpng", 1, "image not found"},

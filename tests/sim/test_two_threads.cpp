@@ -1,0 +1,146 @@
+// The simulator's second thread: front-end packets built ahead of the timing
+// model and fine traversals done ahead on the worker give the same packets,
+// statistics, hit-rate series and image as one thread, with buffers and queues
+// of every size.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <thread>
+#include <vector>
+
+#include "chip/chip_ray.h"
+#include "chip/front_end.h"
+#include "chip/vru.h"
+#include "chip/zorg.h"
+#include "model/procedural.h"
+#include "render/cameras.h"
+#include "sim/packet_ahead.h"
+#include "sim/sim_config.h"
+#include "sim/simulator.h"
+
+namespace edrnr::sim {
+namespace {
+
+const std::filesystem::path kPreset = std::filesystem::path(EDRNR_SOURCE_DIR) / "configs/chip/edr_nr_40nm.yaml";
+
+const SceneModel& scene() {
+  static const SceneModel m = [] {
+    ProceduralOptions o;
+    o.micro_res = 64;
+    o.seed = 11;
+    return make_procedural_model("several", procedural_shapes("several"), o);
+  }();
+  return m;
+}
+
+const SimConfig& preset() {
+  static const SimConfig c = load_sim_config(kPreset);
+  return c;
+}
+
+// Every statistic but the host's timings.
+nlohmann::json chip_stats(const SimResult& r) {
+  nlohmann::json stats = r.stats->to_json();
+  for (auto it = stats.begin(); it != stats.end();)
+    it = it.key().rfind("host.", 0) == 0 ? stats.erase(it) : std::next(it);
+  return stats;
+}
+
+void expect_same_rays(const chip::RayPacket& a, const chip::RayPacket& b) {
+  EXPECT_EQ(a.pixels.sequence, b.pixels.sequence);
+  EXPECT_EQ(a.pixels.valid_mask, b.pixels.valid_mask);
+  EXPECT_EQ(a.travel_sign, b.travel_sign);
+  for (size_t r = 0; r < a.rays.size(); ++r) {
+    const chip::RayState &x = a.rays[r], &y = b.rays[r];
+    EXPECT_EQ(x.valid, y.valid);
+    EXPECT_EQ(x.k, y.k);
+    EXPECT_EQ(x.k_end, y.k_end);
+    EXPECT_EQ(x.ray.origin, y.ray.origin);
+    EXPECT_EQ(x.ray.dir, y.ray.dir);
+    EXPECT_EQ(x.transmittance, y.transmittance);
+  }
+}
+
+TEST(PacketAhead, PacketsBuiltOnAnotherThreadMatchTheFrontEndInOrder) {
+  const SceneModel& m = scene();
+  const Camera cam = orbit_camera(30, 26, 40.0, 25.0, 4.0, 50.0);
+  const ChipConfig& chip = preset().chip;
+  const chip::RayMath math(chip.numerics.traversal_float, chip.step_micro, m.micro_res);
+  const chip::Vru vru(chip.numerics, chip.transmittance_min, chip.background);
+  // What the timing model builds itself, one packet at a time.
+  chip::FrontEnd direct(m, cam, chip.numerics, math, true);
+  chip::Zorg zorg(cam.width, cam.height);
+  std::vector<chip::RayPacket> expected;
+  std::vector<uint64_t> expected_evals;
+  while (!zorg.done()) {
+    const uint64_t before = direct.tsps_position_evals();
+    expected.push_back(direct.build(zorg.next(), vru));
+    expected_evals.push_back(direct.tsps_position_evals() - before);
+  }
+  ASSERT_GT(direct.counters().rays_dropped_abt + direct.counters().rays_dropped_tsps, 0u);
+
+  // A small ring, a second thread building as fast as it can, the consumer
+  // building whatever it finds missing.
+  chip::FrontEnd shared(m, cam, chip.numerics, math, true);
+  PacketAhead ahead(shared, vru, cam.width, cam.height, chip::ScanOrder::ZOrder, 3);
+  std::atomic<bool> stop{false};
+  std::thread producer([&] {
+    while (!stop.load()) ahead.build_one();
+  });
+  PacketAhead::Entry e;
+  for (size_t i = 0; i < expected.size(); ++i) {
+    ahead.take(e);
+    SCOPED_TRACE(i);
+    expect_same_rays(e.packet, expected[i]);
+    EXPECT_EQ(e.tsps_position_evals, expected_evals[i]);
+  }
+  stop.store(true);
+  producer.join();
+  EXPECT_THROW(ahead.take(e), std::logic_error);  // the frame has no packet left
+  EXPECT_EQ(shared.counters().rays, direct.counters().rays);
+  EXPECT_EQ(shared.counters().rays_dropped_abt, direct.counters().rays_dropped_abt);
+  EXPECT_EQ(shared.counters().rays_dropped_tsps, direct.counters().rays_dropped_tsps);
+  EXPECT_EQ(shared.tsps_position_evals(), direct.tsps_position_evals());
+}
+
+TEST(TwoThreads, EveryStatisticAndTheImageMatchOneThread) {
+  const SceneModel& m = scene();
+  std::vector<std::pair<const char*, SimConfig>> variants;
+  auto add = [&](const char* name, auto edit) {
+    SimConfig c = preset();
+    edit(c);
+    variants.push_back({name, c});
+  };
+  add("preset", [](SimConfig&) {});
+  // Queues of one or two: traversals refused by a full queue are done by the FTU.
+  add("tiny buffers", [](SimConfig& c) {
+    c.chip.rp_buffer_capacity = 2;
+    c.chip.rp_rob = {.entries = 2, .entry_depth = 1, .recent_tags = 1};
+    c.chip.ooo_queue_depth = 1;
+    c.memory.micro_grid_cache = {8, 1, Replacement::Fifo, 1, 1, 1};  // one word per line, direct mapped
+    c.chip.micro_grid_cache_bytes = 64;
+  });
+  add("no reordering, no lag-first", [](SimConfig& c) {
+    c.chip.switches.rp_reorder = false;
+    c.chip.switches.lag_first = false;
+    c.chip.switches.ooo_issue = false;
+  });
+  add("large RP buffer", [](SimConfig& c) { c.chip.rp_buffer_capacity = 256; });
+  for (const auto& [name, cfg] : variants) {
+    SCOPED_TRACE(name);
+    for (double azimuth : {30.0, 250.0}) {
+      const Camera cam = orbit_camera(48, 40, azimuth, 25.0, 4.0, 50.0);
+      SimOptions one, two;
+      two.threads = 2;
+      const SimResult a = simulate_chip(m, cam, cfg, one);
+      const SimResult b = simulate_chip(m, cam, cfg, two);
+      ASSERT_GT(a.summary.samples, 0u);
+      EXPECT_EQ(chip_stats(a), chip_stats(b)) << "azimuth " << azimuth;
+      EXPECT_EQ(a.hit_rate_series, b.hit_rate_series);
+      EXPECT_EQ(a.image.data, b.image.data);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace edrnr::sim
