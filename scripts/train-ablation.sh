@@ -22,7 +22,7 @@ out=$2
 shift 2
 iters=4000
 preset=$root/configs/train/default.yaml
-variants="base no-per-cv distortion-0.01 distortion-0.03 tv-1e-6 tv-1e-4 block-tv-1e-4"
+variants="base no-per-cv distortion-0.01 distortion-0.03 tv-1e-6 tv-1e-4 block-tv-1e-4 mlp-tie-1e-3"
 while [ $# -gt 0 ]; do
   case $1 in
     --iters) iters=$2; shift 2 ;;
