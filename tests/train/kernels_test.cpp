@@ -300,6 +300,32 @@ GridSamples random_samples(int micro_res, int n, uint64_t seed) {
   return s;
 }
 
+// One sample at a random point of every micro voxel in [lo, hi).
+GridSamples samples_in_every_voxel(const Vec3i& lo, const Vec3i& hi, uint64_t seed) {
+  GridSamples s;
+  int id = 0;
+  for (int z = lo.z; z < hi.z; ++z)
+    for (int y = lo.y; y < hi.y; ++y)
+      for (int x = lo.x; x < hi.x; ++x) {
+        const int m[3] = {x, y, z};
+        for (int a = 0; a < 3; ++a) {
+          s.pos.push_back(float(m[a]) + rnd(seed, uint64_t(3 * id + a), 0.1f, 0.9f));
+          s.micro.push_back(int16_t(m[a]));
+        }
+        s.ids.push_back(id++);
+      }
+  return s;
+}
+
+// Blocks of fine voxels (1, 2, 3) and (2, 2, 3) of a 32^3 micro grid (block
+// 0's face x = 4 is block 1's face x = 0), F random channels.
+BlockFeatures two_adjacent_blocks(int F, uint64_t seed) {
+  std::vector<uint32_t> fine = {linear_index(1, 2, 3, 8), linear_index(2, 2, 3, 8)};
+  std::vector<float> values(fine.size() * kBlockVerts * size_t(F));
+  for (size_t i = 0; i < values.size(); ++i) values[i] = rnd(seed, i, -1.f, 1.f);
+  return BlockFeatures(32, F, fine, values);
+}
+
 TEST(FeatureGrid, PyramidInterpolatesLinearFunctionsExactly) {
   // Vertex values a linear function of position: every level reproduces it.
   FeaturePyramid pyr(32, {8, 16, 32}, 7, 0.f);
@@ -327,18 +353,7 @@ TEST(FeatureGrid, PyramidTotalVariationCoversTheFinestLevelsAsked) {
     FeaturePyramid pyr(R, {2, 4, 8}, 21, 0.5f);
     const int F = pyr.channels();
     // A sample in every micro voxel touches every vertex of every level.
-    GridSamples s;
-    int id = 0;
-    for (int z = 0; z < R; ++z)
-      for (int y = 0; y < R; ++y)
-        for (int x = 0; x < R; ++x) {
-          const int m[3] = {x, y, z};
-          for (int a = 0; a < 3; ++a) {
-            s.pos.push_back(float(m[a]) + rnd(22, uint64_t(3 * id + a), 0.1f, 0.9f));
-            s.micro.push_back(int16_t(m[a]));
-          }
-          s.ids.push_back(id++);
-        }
+    const GridSamples s = samples_in_every_voxel({0, 0, 0}, {R, R, R}, 22);
     std::vector<float> r(s.ids.size() * size_t(F), 1.f);
     GradientSlabs slabs;
     slabs.build(R, pyr.slab_micro(), s.ids, s.micro);
@@ -460,11 +475,7 @@ TEST(FeatureGrid, PyramidGradientDoesNotDependOnSlabSplit) {
 
 TEST(FeatureGrid, BlockGradientMatchesFiniteDifferences) {
   const int R = 32, F = 4;
-  // Two blocks: fine voxels (1, 2, 3) and (2, 2, 3) of the 8^3 fine grid.
-  std::vector<uint32_t> fine = {linear_index(1, 2, 3, 8), linear_index(2, 2, 3, 8)};
-  std::vector<float> values(fine.size() * kBlockVerts * F);
-  for (size_t i = 0; i < values.size(); ++i) values[i] = rnd(31, i, -1.f, 1.f);
-  BlockFeatures blk(R, F, fine, values);
+  BlockFeatures blk = two_adjacent_blocks(F, 31);
   GridSamples s;
   for (int i = 0; i < 200; ++i) {
     const float p[3] = {rnd(32, uint64_t(i), 4.f, 12.f), rnd(33, uint64_t(i), 8.f, 12.f),
@@ -503,24 +514,9 @@ TEST(FeatureGrid, BlockGradientMatchesFiniteDifferences) {
 
 TEST(FeatureGrid, BlockTotalVariationIsTheGradientOfItsEnergy) {
   const int R = 32, F = 2;
-  // Fine voxels (1, 2, 3) and (2, 2, 3): block 0's face x = 4 is block 1's face x = 0.
-  std::vector<uint32_t> fine = {linear_index(1, 2, 3, 8), linear_index(2, 2, 3, 8)};
-  std::vector<float> values(fine.size() * kBlockVerts * F);
-  for (size_t i = 0; i < values.size(); ++i) values[i] = rnd(41, i, -1.f, 1.f);
-  BlockFeatures blk(R, F, fine, values);
+  BlockFeatures blk = two_adjacent_blocks(F, 41);
   // One sample in every micro voxel of both blocks touches every vertex.
-  GridSamples s;
-  int id = 0;
-  for (int z = 12; z < 16; ++z)
-    for (int y = 8; y < 12; ++y)
-      for (int x = 4; x < 12; ++x) {
-        const int m[3] = {x, y, z};
-        for (int a = 0; a < 3; ++a) {
-          s.pos.push_back(float(m[a]) + rnd(42, uint64_t(3 * id + a), 0.1f, 0.9f));
-          s.micro.push_back(int16_t(m[a]));
-        }
-        s.ids.push_back(id++);
-      }
+  const GridSamples s = samples_in_every_voxel({4, 8, 12}, {12, 12, 16}, 42);
   std::vector<float> r(s.ids.size() * F, 1.f);
   GradientSlabs slabs;
   slabs.build(R, kMicroPerFine, s.ids, s.micro);
