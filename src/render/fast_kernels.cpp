@@ -45,7 +45,10 @@ struct Scratch {
   alignas(64) float cin[kFastMaxWidth * kCap];
   alignas(64) float split[kFastMaxWidth * kCap];
   alignas(64) float rgb[3 * kCap];
-  alignas(64) uint32_t words[8 * kCap];
+  alignas(64) uint32_t words[16 * kCap];
+  // Two-word vertices: per pair of corners (x neighbours), each sample's 4
+  // consecutive words (corner a group 0, 1, corner b group 0, 1).
+  alignas(64) uint32_t pairs[4 * 4 * kCap];
   alignas(64) float fx[kCap], fy[kCap], fz[kCap];
   alignas(64) float out[5 * kCap];
   alignas(64) uint32_t vertex[kCap];
@@ -60,13 +63,22 @@ struct Scratch {
   alignas(64) float dir_q[kFastMaxWidth * kDirRow];
 };
 
-// ACC rows [o, o + NB) = (B ? bias : 0) + W[o.., i0..i1) X[i0..i1), one
-// product at a time in input order. kFma: fused multiply-add (the Int8 path,
-// whose products and sums are exact integers); otherwise multiply then add,
-// the reference's rounding.
+// What a layer does to its sums before they are stored: nothing (mult null,
+// relu false), ReLU (float), or clamp(round(sum * mult[row]), lo, hi) (Int8:
+// the next layer's INT8 input, or raw outputs in 1/256 steps).
+struct Epilogue {
+  const float* mult = nullptr;
+  float lo = 0.f, hi = 0.f;
+  bool relu = false;
+};
+
+// ACC rows [o, o + NB) = epilogue((B ? bias : 0) + W[o.., i0..i1) X[i0..i1)),
+// one product at a time in input order. kFma: fused multiply-add (the Int8
+// path, whose products and sums are exact integers); otherwise multiply then
+// add, the reference's rounding.
 template <int NB, bool kFma>
 HWY_INLINE void DenseBlock(DF d, size_t N, const float* X, int in, int i0, int i1, const float* W, const float* B,
-                           int o, float* ACC) {
+                           int o, float* ACC, const Epilogue& e) {
   VF acc[NB];
   for (int k = 0; k < NB; ++k) acc[k] = B ? hn::Set(d, B[o + k]) : hn::Zero(d);
   for (int i = i0; i < i1; ++i) {
@@ -76,23 +88,32 @@ HWY_INLINE void DenseBlock(DF d, size_t N, const float* X, int in, int i0, int i
       acc[k] = kFma ? hn::MulAdd(w, x, acc[k]) : hn::Add(acc[k], hn::Mul(w, x));
     }
   }
-  for (int k = 0; k < NB; ++k) hn::Store(acc[k], d, ACC + size_t(o + k) * N);
+  for (int k = 0; k < NB; ++k) {
+    VF v = acc[k];
+    if (e.mult) {
+      v = hn::Round(hn::Mul(v, hn::Set(d, e.mult[o + k])));
+      v = hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi));
+    } else if (e.relu) {
+      v = hn::Max(v, hn::Zero(d));
+    }
+    hn::Store(v, d, ACC + size_t(o + k) * N);
+  }
 }
 
 template <bool kFma>
-void Dense(DF d, size_t N, const float* X, int in, int i0, int i1, const float* W, const float* B, int out,
-           float* ACC) {
+void Dense(DF d, size_t N, const float* X, int in, int i0, int i1, const float* W, const float* B, int out, float* ACC,
+           const Epilogue& e = Epilogue()) {
   int o = 0;
-  for (; o + 8 <= out; o += 8) DenseBlock<8, kFma>(d, N, X, in, i0, i1, W, B, o, ACC);
+  for (; o + 8 <= out; o += 8) DenseBlock<8, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
   if (o + 4 <= out) {
-    DenseBlock<4, kFma>(d, N, X, in, i0, i1, W, B, o, ACC);
+    DenseBlock<4, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
     o += 4;
   }
   if (o + 2 <= out) {
-    DenseBlock<2, kFma>(d, N, X, in, i0, i1, W, B, o, ACC);
+    DenseBlock<2, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
     o += 2;
   }
-  if (o < out) DenseBlock<1, kFma>(d, N, X, in, i0, i1, W, B, o, ACC);
+  if (o < out) DenseBlock<1, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
 }
 
 // Features of the chunk's samples from INT4 codes, 8 channels per 32-bit
@@ -114,10 +135,32 @@ void InterpolateQ4(DF d, size_t N, const FastModel& fm, Scratch& s, const float*
   const int32_t vertex_words = F / 8;
   const auto vertex = hn::Mul(hn::BitCast(di, hn::Load(du, s.vertex)), hn::Set(di, vertex_words));
   const auto mask = hn::Set(du, 15u);
+  // Two words per vertex (16 channels): corners j and j + 1 (j even) are
+  // neighbours along x, so their 4 words are consecutive: copied per sample
+  // and de-interleaved, which is cheaper than 16 gathers.
+  const bool pairs = vertex_words == 2;
+  if (pairs) {
+    for (size_t l = 0; l < N; ++l) {
+      const uint32_t* v = q4 + size_t(s.vertex[l]) * 2;
+      for (int p = 0; p < 4; ++p)
+        std::memcpy(s.pairs + (size_t(p) * N + l) * 4, v + size_t(kCornerVertex[2 * p]) * 2, 4 * sizeof(uint32_t));
+    }
+    for (int p = 0; p < 4; ++p) {
+      hn::Vec<decltype(du)> a0, a1, b0, b1;
+      hn::LoadInterleaved4(du, s.pairs + size_t(p) * N * 4, a0, a1, b0, b1);
+      hn::Store(a0, du, s.words + size_t(2 * p) * N);
+      hn::Store(b0, du, s.words + size_t(2 * p + 1) * N);
+      hn::Store(a1, du, s.words + size_t(8 + 2 * p) * N);
+      hn::Store(b1, du, s.words + size_t(8 + 2 * p + 1) * N);
+    }
+  }
   for (int g = 0; g < F / 8; ++g) {
-    for (int j = 0; j < 8; ++j) {
-      const auto idx = hn::Add(vertex, hn::Set(di, int32_t(kCornerVertex[j]) * vertex_words + g));
-      hn::Store(hn::GatherIndex(du, q4, idx), du, s.words + size_t(j) * N);
+    const uint32_t* words = s.words + (pairs ? size_t(g) * 8 * N : 0);
+    if (!pairs) {
+      for (int j = 0; j < 8; ++j) {
+        const auto idx = hn::Add(vertex, hn::Set(di, int32_t(kCornerVertex[j]) * vertex_words + g));
+        hn::Store(hn::GatherIndex(du, q4, idx), du, s.words + size_t(j) * N);
+      }
     }
     const int c0 = 8 * g;
     VF acc[8];
@@ -128,7 +171,7 @@ void InterpolateQ4(DF d, size_t N, const FastModel& fm, Scratch& s, const float*
       scale[k] = hn::Set(d, fm.feature_scale[size_t(c0 + k)]);
     }
     for (int j = 0; j < 8; ++j) {
-      const auto word = hn::Load(du, s.words + size_t(j) * N);
+      const auto word = hn::Load(du, words + size_t(j) * N);
       for (int k = 0; k < 8; ++k) {
         const VF code = hn::ConvertTo(d, hn::BitCast(di, hn::And(hn::ShiftRightSame(word, 4 * k), mask)));
         if (kInt8) {
@@ -201,30 +244,31 @@ void RunNet(DF d, size_t N, const std::vector<FastLayer>& net, const float* p, c
     const FastLayer& L = net[l];
     const bool hidden = l + 1 < net.size();
     float* y = !hidden ? last : (x == a ? b : a);
+    // Int8: ReLU and the next layer's INT8 input (hidden), or raw outputs
+    // in 1/256 steps (last); float: ReLU (hidden).
+    Epilogue e;
+    if (kInt8) {
+      e.mult = p + L.m;
+      e.lo = hidden ? 0.f : -32768.f;
+      e.hi = hidden ? 127.f : 32767.f;
+    } else {
+      e.relu = hidden;
+    }
     if (kInt8 && l == 0 && split >= 0) {
       // The inputs before `split` here; those from it on (the direction)
-      // were summed per ray (DirectionParts): added by the sample's slot.
+      // were summed per ray (DirectionParts): added by the sample's slot,
+      // then the epilogue.
       Dense<true>(d, N, x, L.in, 0, split, p + L.w, p + L.b, L.out, y);
       const hn::RebindToSigned<DF> di;
       const auto lanes = hn::IndicesFromVec(d, hn::Load(di, slots));
       for (int o = 0; o < L.out; ++o) {
         float* r = y + size_t(o) * N;
         const VF q = hn::TableLookupLanes(hn::LoadU(d, dir_q + size_t(o) * kDirRow), lanes);
-        hn::Store(hn::Add(hn::Load(d, r), q), d, r);
+        const VF v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), q), hn::Set(d, e.mult[o])));
+        hn::Store(hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi)), d, r);
       }
     } else {
-      Dense<kInt8>(d, N, x, L.in, 0, L.in, p + L.w, p + L.b, L.out, y);
-    }
-    if (kInt8) {
-      if (hidden)
-        Requantize(d, N, y, L.out, p + L.m, true, 0.f, 127.f);  // ReLU, then the next layer's INT8 input
-      else
-        Requantize(d, N, y, L.out, p + L.m, true, -32768.f, 32767.f);  // raw outputs, 1/256 steps
-    } else if (hidden) {
-      for (int o = 0; o < L.out; ++o) {
-        float* r = y + size_t(o) * N;
-        hn::Store(hn::Max(hn::Load(d, r), hn::Zero(d)), d, r);
-      }
+      Dense<kInt8>(d, N, x, L.in, 0, L.in, p + L.w, p + L.b, L.out, y, e);
     }
     x = y;
   }
@@ -235,8 +279,12 @@ void GatherDirections(DF d, size_t N, const float* dir, size_t ray_stride, const
                       float* X) {
   const hn::RebindToSigned<DF> di;
   const auto ray = hn::BitCast(di, hn::Load(hn::RebindToUnsigned<DF>(), rays));
-  for (int k = 0; k < D; ++k)
-    hn::Store(hn::GatherIndex(d, dir + size_t(k) * ray_stride, ray), d, X + size_t(G + k) * N);
+  // Consecutive rays (the common case: neighbouring pixels): plain loads.
+  const bool run = hn::AllTrue(di, hn::Eq(ray, hn::Add(hn::Set(di, int32_t(rays[0])), hn::Iota(di, 0))));
+  for (int k = 0; k < D; ++k) {
+    const float* row = dir + size_t(k) * ray_stride;
+    hn::Store(run ? hn::LoadU(d, row + rays[0]) : hn::GatherIndex(d, row, ray), d, X + size_t(G + k) * N);
+  }
 }
 
 // Int8: dir_q for `count` rays (slots 0..count-1, ray of slot j: rays[j]):

@@ -248,6 +248,30 @@ TEST(Fast, RaysThatMissGiveExactlyTheBackground) {
   EXPECT_EQ(stats.samples, 0u);
 }
 
+// INT4 features are read two ways: 16 channels (two words per vertex) as
+// runs of neighbouring corners, other multiples of 8 by gathers, other counts
+// one value at a time. Each matches the reference.
+TEST(Fast, QuantizedFeaturesOfAnyWidthMatchTheReference) {
+  for (int channels : {8, 12, 16, 24}) {
+    ProceduralOptions o;
+    o.micro_res = 64;
+    o.seed = 7;
+    o.feature_channels = channels;
+    const SceneModel m = make_procedural_model("several", procedural_shapes("several"), o);
+    ASSERT_EQ(m.feature_channels, channels);
+    const FastRenderer fast(m, ModelForm::Quantized, FastPath::Float);
+    RenderSettings s;
+    s.form = ModelForm::Quantized;
+    for (const Camera& cam : views(37, 29)) {
+      RenderStats rs, fs;
+      const Image ref = render_reference(m, cam, s, &rs);
+      EXPECT_GE(psnr(fast.render(cam, s, &fs), ref), 50.0) << channels << " channels";
+      EXPECT_EQ(fs.samples, rs.samples);
+      EXPECT_GT(fs.samples, 100u);
+    }
+  }
+}
+
 TEST(Fast, Int8PathIsCloseToTheReference) {
   // The INT8 path quantizes activations: close to the float image, not equal.
   const SceneModel m = several_model(128, false);
