@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <functional>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -19,8 +18,6 @@
 #include "sim/chrome_trace.h"
 #include "sim/fifo.h"
 #include "sim/memory_system.h"
-#include "sim/packet_ahead.h"
-#include "sim/sim_worker.h"
 
 namespace edrnr::sim {
 
@@ -35,10 +32,6 @@ const char* const kUnitNames[kUnits] = {"front_end", "ctu", "ftu", "ooo_si", "cf
 // origin and direction (3 x 25-bit traversal floats each) and two 22-bit
 // candidate indices, 776 bits, in 64-bit words of the "others" SRAM.
 constexpr uint64_t kRpTraversalStateWords = 13;
-
-// With two threads, how many front-end packets may be built ahead of the
-// timing model (a few hundred kilobytes).
-constexpr size_t kPacketsAhead = 256;
 
 uint64_t ceil_div(uint64_t a, uint64_t b) { return (a + b - 1) / b; }
 
@@ -63,18 +56,6 @@ struct Flight {
   std::vector<uint8_t> rays;           // ray of each sample
   bool stay = false;                   // a live ray is still in the CV: reschedule; else leave it
   uint64_t job = 0;                    // job sequence number
-};
-
-// An RP's fine traversal (one FTU run), possibly done ahead on the worker.
-struct TraversalJob {
-  enum State : uint8_t { kNone, kPending, kRunning, kDone };
-  std::atomic<uint8_t> state{kNone};
-  uint32_t tag = 0;  // its CV
-  bool has_batch = false;
-  SampleBatch batch;
-  uint64_t iterations = 0, lane_cycles = 0;  // for the FTU's timing
-  std::vector<uint32_t> reads;               // fine voxels whose micro-grid word it read, in order
-  std::vector<SampleCoord> coords;           // the batch's sample coordinates (SCC), by sample
 };
 
 // A live ray of the packet whose current candidate lies in CV `cv_tag`.
@@ -151,6 +132,86 @@ class BatchArithmetic {
   uint64_t batch_ = 0;
 };
 
+// Runs BatchArithmetic jobs in order on a second thread. Each side spins
+// briefly before it sleeps, and wakes the other only when that one sleeps, so
+// that a job costs no system call while both are busy.
+class Worker {
+ public:
+  Worker(BatchArithmetic& arithmetic, RpBuffer& buffer, std::vector<Flight>& flights, size_t capacity)
+      : arithmetic_(arithmetic), buffer_(buffer), flights_(flights), queue_(capacity) {
+    thread_ = std::thread([this] { loop(); });
+  }
+  ~Worker() {
+    stop_.store(true);
+    submitted_.fetch_add(1);
+    submitted_.notify_one();
+    thread_.join();
+  }
+
+  // Queues the job of RP `rp` (at most `capacity` jobs outstanding); returns
+  // its sequence number.
+  uint64_t submit(uint32_t rp) {
+    const uint64_t seq = submitted_.load();
+    queue_[seq % queue_.size()] = rp;
+    submitted_.store(seq + 1);
+    if (worker_sleeping_.load()) submitted_.notify_one();
+    return seq;
+  }
+  // Waits until job `seq` is done (its results are then visible).
+  void wait(uint64_t seq) {
+    if (!spin_until([&] { return completed_.load() > seq; })) {
+      main_sleeping_.store(true);
+      for (uint64_t done = completed_.load(); done <= seq; done = completed_.load()) completed_.wait(done);
+      main_sleeping_.store(false);
+    }
+    if (error_) std::rethrow_exception(error_);
+  }
+
+ private:
+  template <class Ready>
+  static bool spin_until(Ready ready) {
+    for (int i = 0; i < 256; ++i) {
+      if (ready()) return true;
+#if defined(__x86_64__) || defined(__i386__)
+      __builtin_ia32_pause();
+#endif
+    }
+    return ready();
+  }
+
+  void loop() {
+    uint64_t next = 0;
+    for (;;) {
+      if (!spin_until([&] { return submitted_.load() != next; })) {
+        worker_sleeping_.store(true);
+        for (uint64_t avail = submitted_.load(); avail == next; avail = submitted_.load()) submitted_.wait(avail);
+        worker_sleeping_.store(false);
+      }
+      if (stop_.load()) return;
+      const uint64_t avail = submitted_.load();
+      for (; next < avail; ++next) {
+        const uint32_t rp = queue_[next % queue_.size()];
+        try {
+          if (!error_) arithmetic_.run(buffer_[rp], flights_[rp]);
+        } catch (...) {
+          error_ = std::current_exception();
+        }
+        completed_.store(next + 1);
+        if (main_sleeping_.load()) completed_.notify_one();
+      }
+    }
+  }
+
+  BatchArithmetic& arithmetic_;
+  RpBuffer& buffer_;
+  std::vector<Flight>& flights_;
+  std::vector<uint32_t> queue_;
+  std::atomic<uint64_t> submitted_{0}, completed_{0};
+  std::atomic<bool> stop_{false}, worker_sleeping_{false}, main_sleeping_{false};
+  std::exception_ptr error_;
+  std::thread thread_;
+};
+
 class HitSeries {
  public:
   explicit HitSeries(uint64_t window) : window_(window) {}
@@ -201,7 +262,7 @@ class Engine {
         rob_(RpRobConfig{config.chip.rp_rob.entries, config.chip.rp_rob.entry_depth, config.chip.rp_rob.recent_tags,
                          config.chip.switches.rp_reorder, config.chip.rp_rob.tag_switch,
                          config.chip.rp_rob.switch_when_idle}),
-        ftu_(model, math_, config.chip.switches.lag_first),
+        ftu_(model, math_, config.chip.switches.lag_first, size_t(config.chip.micro_grid_cache_bytes / 8)),
         ooo_(config.chip.ooo_queue_depth, config.chip.switches.ooo_issue),
         cfiu_(model, n_,
               FeatureCacheConfig{feature_cache_lines(config.chip, model.feature_channels), config.chip.mshr_entries,
@@ -229,13 +290,12 @@ class Engine {
         done_q_("vru_decisions", rp_capacity_, uint64_t(t_.vru_latency_cycles)),
         batches_(size_t(config.chip.ooo_queue_depth) + 1),
         flights_(rp_capacity_),
-        sequence_(rp_capacity_),
-        traversal_(new TraversalJob[rp_capacity_]),
-        micro_lru_(size_t(config.chip.micro_grid_cache_bytes / 8)) {
+        sequence_(rp_capacity_) {
     if (cfiu_.cache().lines() <= config.chip.ooo_queue_depth)
       fail("chip config: the feature cache's {} lines must outnumber the {} OoO-SI entries that reserve them",
            cfiu_.cache().lines(), config.chip.ooo_queue_depth);
     for (uint32_t i = 0; i < uint32_t(batches_.size()); ++i) free_slots_.push_back(i);
+    ftu_.set_micro_read_log(&micro_log_);
     front_.set_encode_directions(false);  // the batch arithmetic encodes (on its thread with threads = 2)
     mem_.set_request_observer(options.dram_request_observer);
     mlp_lines_ = ceil_div(mlp_bytes_, cfg_.memory.mlp_cache.line_bytes);
@@ -252,11 +312,7 @@ class Engine {
     macs_per_sample_ = macs;
     neurons_per_sample_ = neurons;
     tme_cycles_per_sample_ = std::max<uint64_t>(1, ceil_div(macs, uint64_t(t_.tme_macs_per_cycle)));
-    if (options.threads > 1) {
-      ahead_ = std::make_unique<PacketAhead>(front_, vru_, camera.width, camera.height, zorg_.order(), kPacketsAhead);
-      ftu_worker_ = std::make_unique<Ftu>(model, math_, config.chip.switches.lag_first);
-      worker_ = std::make_unique<SimWorker>([this](const WorkerJob& j) { run_job(j); }, rp_capacity_, ahead_.get());
-    }
+    if (options.threads > 1) worker_ = std::make_unique<Worker>(arithmetic_, buffer_, flights_, rp_capacity_);
   }
 
   void run() {
@@ -332,19 +388,10 @@ class Engine {
     }
     if (!fe_.holding && !zorg_.done()) {
       const PixelQuad quad = zorg_.next();
-      uint64_t evals = 0;
-      if (ahead_) {
-        ahead_->take(ahead_entry_);
-        if (ahead_entry_.packet.pixels.sequence != quad.sequence)
-          throw std::logic_error("cycle simulator: a packet built ahead is out of order");
-        fe_.packet = std::move(ahead_entry_.packet);
-        evals = ahead_entry_.tsps_position_evals;
-      } else {
-        const uint64_t before = front_.tsps_position_evals();
-        fe_.packet = front_.build(quad, vru_);
-        evals = front_.tsps_position_evals() - before;
-      }
-      const uint64_t tsps_cycles = ceil_div(evals, uint64_t(t_.tsps_position_evals_per_cycle));
+      const uint64_t evals = front_.tsps_position_evals();
+      fe_.packet = front_.build(quad, vru_);
+      const uint64_t tsps_cycles =
+          ceil_div(front_.tsps_position_evals() - evals, uint64_t(t_.tsps_position_evals_per_cycle));
       fe_.end = c + std::max<uint64_t>(uint64_t(t_.zorg_cycles_per_rp), tsps_cycles);
       fe_.sequence = quad.sequence;
       fe_.holding = true;
@@ -362,7 +409,6 @@ class Engine {
         finish(ctu_s_.rp);
         ctu_s_.holding = false;
       } else if (rob_.insert(ctu_s_.rp, ctu_s_.result.cv_tag)) {
-        submit_traversal(ctu_s_.rp, ctu_s_.result.cv_tag);
         ctu_s_.holding = false;
       } else {
         st = UnitState::StallOutput;
@@ -429,17 +475,17 @@ class Engine {
         s.rp = sched->rp;
         s.slot = free_slots_.back();
         free_slots_.pop_back();
-        TraversalJob& t = obtain_traversal(sched->rp, sched->tag);
-        s.has_batch = t.has_batch;
-        std::swap(batches_[s.slot], t.batch);
-        const uint64_t cycles =
-            t.iterations * uint64_t(t_.ftu_cycles_per_iteration) + ceil_div(t.lane_cycles, uint64_t(t_.ftu_lanes));
+        micro_log_.clear();
+        const FtuCounters before = ftu_.counters();
+        s.has_batch = ftu_.run(buffer_[sched->rp], sched->rp, sched->tag, batches_[s.slot]);
+        const FtuCounters& after = ftu_.counters();
+        const uint64_t lane_cycles =
+            after.leaf_checks - before.leaf_checks + after.candidate_tests - before.candidate_tests;
+        const uint64_t cycles = (after.iterations - before.iterations) * uint64_t(t_.ftu_cycles_per_iteration) +
+                                ceil_div(lane_cycles, uint64_t(t_.ftu_lanes));
         s.end = c + std::max<uint64_t>(1, cycles);
         s.reads.clear();
-        for (uint32_t f : t.reads) {
-          micro_word_hits_ += micro_lru_.access(f);  // the micro-grid bitmap cache, in schedule order
-          s.reads.push_back(map_.micro_word(uint32_t(model_.fine_to_block[f])));
-        }
+        for (uint32_t f : micro_log_) s.reads.push_back(map_.micro_word(uint32_t(model_.fine_to_block[f])));
         s.next_read = 0;
         s.ready = c;
         s.holding = true;
@@ -495,89 +541,25 @@ class Engine {
     set_state(kOooSi, st);
   }
 
-  // The fine traversal of an RP in the RP-ROB depends only on its rays and CV
-  // (the micro-grid bitmap cache's LRU state is kept apart, in schedule
-  // order), and nothing changes them until the FTU schedules it: with two
-  // threads it is done ahead on the worker, unless its queue is full; the
-  // FTU takes over a job the worker has not started.
-  void submit_traversal(uint32_t rp, uint32_t tag) {
-    if (!worker_ || !worker_->traversal_room()) return;
-    TraversalJob& t = traversal_[rp];
-    t.tag = tag;
-    t.state.store(TraversalJob::kPending, std::memory_order_release);
-    worker_->submit_traversal(rp);
-  }
-
-  // The traversal of RP `rp` in CV `tag`: done here, or waited for.
-  TraversalJob& obtain_traversal(uint32_t rp, uint32_t tag) {
-    TraversalJob& t = traversal_[rp];
-    uint8_t expected = TraversalJob::kPending;
-    if (t.state.load(std::memory_order_acquire) == TraversalJob::kNone) {
-      t.tag = tag;
-      traverse(ftu_, rp, t);
-    } else if (t.state.compare_exchange_strong(expected, TraversalJob::kRunning, std::memory_order_acq_rel)) {
-      traverse(ftu_, rp, t);
-    } else {
-      // The worker is on it (a few microseconds); a descheduled worker gets
-      // the core back.
-      for (int spins = 0; t.state.load(std::memory_order_acquire) != TraversalJob::kDone; ++spins) {
-        if (spins >= 256) std::this_thread::yield();
-#if defined(__x86_64__) || defined(__i386__)
-        __builtin_ia32_pause();
-#endif
-      }
-    }
-    if (t.tag != tag) throw std::logic_error("cycle simulator: an RP was traversed ahead in another CV");
-    t.state.store(TraversalJob::kNone, std::memory_order_relaxed);
-    return t;
-  }
-
-  void traverse(Ftu& ftu, uint32_t rp, TraversalJob& t) {
-    t.reads.clear();
-    ftu.set_micro_read_log(&t.reads);
-    const FtuCounters before = ftu.counters();
-    t.has_batch = ftu.run(buffer_[rp], rp, t.tag, t.batch);
-    const FtuCounters& after = ftu.counters();
-    t.iterations = after.iterations - before.iterations;
-    t.lane_cycles = after.leaf_checks - before.leaf_checks + after.candidate_tests - before.candidate_tests;
-    // The SCC's sample coordinates (for the CFIU's bank reads and sums)
-    // depend on the rays and candidates alone.
-    t.coords.clear();
-    if (!t.has_batch) return;
-    const RayPacket& p = buffer_[rp];
-    for (const SampleRef& sref : t.batch.samples)
-      t.coords.push_back(sample_coordinate(math_, p.rays[sref.ray].ray, sref.k, n_.interp_fraction_bits, n_.rounding));
-  }
-
-  // A job on the worker thread.
-  void run_job(const WorkerJob& j) {
-    if (j.kind == WorkerJob::Arithmetic) {
-      arithmetic_.run(buffer_[j.rp], flights_[j.rp]);
-      return;
-    }
-    TraversalJob& t = traversal_[j.rp];
-    uint8_t expected = TraversalJob::kPending;
-    if (!t.state.compare_exchange_strong(expected, TraversalJob::kRunning, std::memory_order_acq_rel))
-      return;  // taken by the FTU already (or a stale entry)
-    traverse(*ftu_worker_, j.rp, t);
-    t.state.store(TraversalJob::kDone, std::memory_order_release);
-  }
-
   // The batch's arithmetic starts as soon as it exists: it depends only on
   // the samples, the model and its RP's rays, and the RP has no other batch
-  // in flight. Its sample coordinates, for the CFIU's bank reads at issue,
-  // came with the RP's traversal (nothing re-traverses the RP before this).
+  // in flight. The sample coordinates are computed here, for the CFIU's bank
+  // reads at issue.
   void start_batch(uint32_t rp, uint32_t slot) {
     const SampleBatch& batch = batches_[slot];
     Flight& f = flights_[rp];
     f.slot = slot;
     f.block = uint32_t(batch.block);
     f.cv_tag = batch.cv_tag;
-    std::swap(f.coords, traversal_[rp].coords);  // computed with the traversal (the RP's last)
+    f.coords.clear();
     f.rays.clear();
-    for (const SampleRef& sref : batch.samples) f.rays.push_back(sref.ray);
+    const RayPacket& p = buffer_[rp];
+    for (const SampleRef& sref : batch.samples) {
+      f.coords.push_back(sample_coordinate(math_, p.rays[sref.ray].ray, sref.k, n_.interp_fraction_bits, n_.rounding));
+      f.rays.push_back(sref.ray);
+    }
     if (worker_)
-      f.job = worker_->submit_arithmetic(rp);
+      f.job = worker_->submit(rp);
     else
       arithmetic_.run(buffer_[rp], f);
   }
@@ -763,7 +745,6 @@ class Engine {
     if (f.stay) {
       ++fine_reschedules_;
       rob_.reschedule(rp);
-      submit_traversal(rp, f.cv_tag);
     } else {
       leave_cv(rp);
     }
@@ -900,8 +881,6 @@ class Engine {
     c.zorg_skipped_quads = zorg_.skipped_quads();
     c.ctu = ctu_.counters();
     c.ftu = ftu_.counters();
-    if (ftu_worker_) c.ftu += ftu_worker_->counters();
-    c.ftu.micro_word_hits = micro_word_hits_;
     c.rp_rob = rob_.counters();
     c.ooo = ooo_.counters();
     c.feature_cache = cfiu_.cache().counters();
@@ -1181,17 +1160,12 @@ class Engine {
   Fifo<uint32_t> done_q_;
   std::vector<SampleBatch> batches_;  // the computation SRAM: OoO-SI entries plus the batch the CFIU reads
   std::vector<uint32_t> free_slots_;
-  std::vector<Flight> flights_;                // by RP pointer
-  std::vector<uint64_t> sequence_;             // by RP pointer: ZORG issue index
-  std::unique_ptr<TraversalJob[]> traversal_;  // by RP pointer
-  std::unique_ptr<Ftu> ftu_worker_;            // with two threads: the worker's FTU model
-  LruTags micro_lru_;                          // the FTU's micro-grid bitmap cache (hit or miss per word)
-  uint64_t micro_word_hits_ = 0;
+  std::vector<Flight> flights_;     // by RP pointer
+  std::vector<uint64_t> sequence_;  // by RP pointer: ZORG issue index
+  std::vector<uint32_t> micro_log_;
   std::vector<MemoryCompletion> completions_;
   std::vector<uint64_t> retry_micro_, retry_mlp_;
-  std::unique_ptr<PacketAhead> ahead_;  // with two threads: the front end's packets, built ahead
-  PacketAhead::Entry ahead_entry_;
-  std::unique_ptr<SimWorker> worker_;  // after ahead_: stopped first
+  std::unique_ptr<Worker> worker_;
 
   FrontEndShell fe_;
   CtuShell ctu_s_;

@@ -14,7 +14,6 @@
 #include "chip/zorg.h"
 #include "model/procedural.h"
 #include "render/cameras.h"
-#include "sim/packet_ahead.h"
 #include "sim/sim_config.h"
 #include "sim/simulator.h"
 
@@ -59,48 +58,6 @@ void expect_same_rays(const chip::RayPacket& a, const chip::RayPacket& b) {
     EXPECT_EQ(x.ray.dir, y.ray.dir);
     EXPECT_EQ(x.transmittance, y.transmittance);
   }
-}
-
-TEST(PacketAhead, PacketsBuiltOnAnotherThreadMatchTheFrontEndInOrder) {
-  const SceneModel& m = scene();
-  const Camera cam = orbit_camera(30, 26, 40.0, 25.0, 4.0, 50.0);
-  const ChipConfig& chip = preset().chip;
-  const chip::RayMath math(chip.numerics.traversal_float, chip.step_micro, m.micro_res);
-  const chip::Vru vru(chip.numerics, chip.transmittance_min, chip.background);
-  // What the timing model builds itself, one packet at a time.
-  chip::FrontEnd direct(m, cam, chip.numerics, math, true);
-  chip::Zorg zorg(cam.width, cam.height);
-  std::vector<chip::RayPacket> expected;
-  std::vector<uint64_t> expected_evals;
-  while (!zorg.done()) {
-    const uint64_t before = direct.tsps_position_evals();
-    expected.push_back(direct.build(zorg.next(), vru));
-    expected_evals.push_back(direct.tsps_position_evals() - before);
-  }
-  ASSERT_GT(direct.counters().rays_dropped_abt + direct.counters().rays_dropped_tsps, 0u);
-
-  // A small ring, a second thread building as fast as it can, the consumer
-  // building whatever it finds missing.
-  chip::FrontEnd shared(m, cam, chip.numerics, math, true);
-  PacketAhead ahead(shared, vru, cam.width, cam.height, chip::ScanOrder::ZOrder, 3);
-  std::atomic<bool> stop{false};
-  std::thread producer([&] {
-    while (!stop.load()) ahead.build_one();
-  });
-  PacketAhead::Entry e;
-  for (size_t i = 0; i < expected.size(); ++i) {
-    ahead.take(e);
-    SCOPED_TRACE(i);
-    expect_same_rays(e.packet, expected[i]);
-    EXPECT_EQ(e.tsps_position_evals, expected_evals[i]);
-  }
-  stop.store(true);
-  producer.join();
-  EXPECT_THROW(ahead.take(e), std::logic_error);  // the frame has no packet left
-  EXPECT_EQ(shared.counters().rays, direct.counters().rays);
-  EXPECT_EQ(shared.counters().rays_dropped_abt, direct.counters().rays_dropped_abt);
-  EXPECT_EQ(shared.counters().rays_dropped_tsps, direct.counters().rays_dropped_tsps);
-  EXPECT_EQ(shared.tsps_position_evals(), direct.tsps_position_evals());
 }
 
 TEST(TwoThreads, EveryStatisticAndTheImageMatchOneThread) {
