@@ -20,6 +20,7 @@
 #include "core/file_io.h"
 #include "model/procedural.h"
 #include "train/synthetic.h"
+#include "train/trainer.h"
 
 namespace edrnr {
 namespace {
@@ -199,6 +200,32 @@ TEST_F(Outputs, TrainingRefusesOutputsThatCollide) {
   EXPECT_NE(read_file_text(m), read_file_text(dir_ / "f.edrnr"));
   EXPECT_EQ(run("inspect " + m.string()).exit_code, 0);
   EXPECT_FALSE(fs::exists(dir_ / "m2.edrnr.ckpt"));
+}
+
+// --config may be repeated: each file's keys override the one before, the
+// keys a file does not set are kept, and a bad key names its file.
+TEST_F(Outputs, RepeatedConfigsApplyInOrder) {
+  const std::string data = dataset();
+  const fs::path overlay = dir_ / "overlay.yaml", bad = dir_ / "bad-overlay.yaml";
+  write_file_atomic(overlay, std::string("qat_fraction: 0.2\ndistortion_weight: 0.02\ntv_levels: 2\n"));
+  write_file_atomic(bad, std::string("tv_levels: 9\n"));
+  const fs::path m = dir_ / "o.edrnr", ckpt = dir_ / "o.edrnr.ckpt";
+  RunResult r = run("train " + data + " -o " + m.string() + " --iters 40 --stop-after 0 --threads 1 --config " +
+                    tiny_config() + " --config " + overlay.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const train::TrainConfig c = train::Trainer::checkpoint_config(read_file_bytes(ckpt), ckpt.string());
+  EXPECT_EQ(c.micro_res, 32);             // from the first file only
+  EXPECT_FLOAT_EQ(c.qat_fraction, 0.2f);  // both set it: the second wins
+  EXPECT_FLOAT_EQ(c.per_cv_fraction, 0.15f);
+  EXPECT_FLOAT_EQ(c.distortion_weight, 0.02f);
+  EXPECT_EQ(c.tv_levels, 2);
+  EXPECT_EQ(c.iters, 40);  // flags override every file
+  r = run("train " + data + " -o " + (dir_ / "b.edrnr").string() + " --iters 40 --config " + tiny_config() +
+          " --config " + bad.string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("bad-overlay.yaml"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("tv_levels"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "b.edrnr"));
 }
 
 // SIGTERM stops training with a checkpoint, as SIGINT does, and the run
