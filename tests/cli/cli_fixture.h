@@ -43,6 +43,16 @@ class CliTest : public ::testing::Test {
     return r;
   }
 
+  // A small quantized sphere model (make-scene) in the test folder, made once.
+  std::string sphere_model() {
+    const std::filesystem::path m = dir_ / "sphere.edrnr";
+    if (!std::filesystem::exists(m)) {
+      const RunResult r = run("make-scene sphere --res 32 --quantized-only -o " + m.string());
+      EXPECT_EQ(r.exit_code, 0) << r.err;
+    }
+    return m.string();
+  }
+
   std::filesystem::path save(const SceneModel& m, const std::string& name) {
     std::filesystem::path p = dir_ / name;
     save_model(p, m);

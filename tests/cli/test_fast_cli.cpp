@@ -18,16 +18,6 @@ namespace fs = std::filesystem;
 
 class FastCliTest : public CliTest {
  protected:
-  // A small quantized sphere model in the test folder.
-  std::string scene() {
-    const fs::path m = dir_ / "sphere.edrnr";
-    if (!fs::exists(m)) {
-      const RunResult r = run("make-scene sphere --res 32 --quantized-only -o " + m.string());
-      EXPECT_EQ(r.exit_code, 0) << r.err;
-    }
-    return m.string();
-  }
-
   // Runs `args` with PATH set to `path` only (the binary is called by its full path).
   RunResult run_with_path(const fs::path& path, const std::string& args) {
     const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
@@ -57,7 +47,7 @@ class FastCliTest : public CliTest {
 };
 
 TEST_F(FastCliTest, BenchRenderRejectsBadFlags) {
-  const std::string m = scene();
+  const std::string m = sphere_model();
   struct Case {
     std::string args, message;
   };
@@ -84,7 +74,7 @@ TEST_F(FastCliTest, BenchRenderRejectsBadFlags) {
 }
 
 TEST_F(FastCliTest, BenchRenderRunsOnATinyScene) {
-  const std::string m = scene();
+  const std::string m = sphere_model();
   const RunResult r =
       run("bench render " + m + " --width 32 --views 0,1 --frames 1 --warmup 0 --vs reference --threads 2");
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -105,7 +95,7 @@ TEST_F(FastCliTest, BenchRenderRunsOnATinyScene) {
 }
 
 TEST_F(FastCliTest, TurntableWithoutFfmpegKeepsTheFrames) {
-  const std::string m = scene();
+  const std::string m = sphere_model();
   const fs::path bin = dir_ / "empty_bin", frames = dir_ / "frames";
   fs::create_directories(bin);
   const RunResult r =
@@ -131,7 +121,7 @@ TEST_F(FastCliTest, TurntableWithoutFfmpegKeepsTheFrames) {
 }
 
 TEST_F(FastCliTest, TurntableHandsTheFramesToFfmpeg) {
-  const std::string m = scene();
+  const std::string m = sphere_model();
   const fs::path bin = dir_ / "bin", frames = dir_ / "frames";
   fs::create_directories(bin);
   // A stand-in ffmpeg: records its arguments and writes its last one (the video).
@@ -160,7 +150,7 @@ TEST_F(FastCliTest, TurntableHandsTheFramesToFfmpeg) {
 }
 
 TEST_F(FastCliTest, TurntableRejectsBadFlags) {
-  const std::string m = scene();
+  const std::string m = sphere_model();
   const std::string out = (dir_ / "t").string();
   RunResult r = run("render " + m + " --engine fast --turntable 0 -o " + out);
   EXPECT_NE(r.exit_code, 0);

@@ -29,13 +29,6 @@ namespace fs = std::filesystem;
 
 class Outputs : public CliTest {
  protected:
-  std::string model() {
-    const fs::path m = dir_ / "m.edrnr";
-    if (!fs::exists(m)) {
-      EXPECT_EQ(run("make-scene sphere --res 32 --quantized-only -o " + m.string()).exit_code, 0);
-    }
-    return m.string();
-  }
   // 4 training and 2 test views at 16 x 16 of a sphere.
   std::string dataset() {
     const fs::path d = dir_ / "data";
@@ -104,7 +97,7 @@ class Outputs : public CliTest {
 // Every command's output given as a symbolic link: the link stays, its target
 // gets the new contents.
 TEST_F(Outputs, SymbolicLinksAreFollowedByEveryCommand) {
-  const std::string m = model(), data = dataset();
+  const std::string m = sphere_model(), data = dataset();
   fs::create_directories(dir_ / "real");
   struct Case {
     std::string link, args;
@@ -140,7 +133,7 @@ TEST_F(Outputs, SymbolicLinksAreFollowedByEveryCommand) {
 // A FIFO (as a device would be) is written through and stays a FIFO; nothing
 // is written beside it.
 TEST_F(Outputs, FifosAreWrittenThroughByEveryCommand) {
-  const std::string m = model(), data = dataset();
+  const std::string m = sphere_model(), data = dataset();
   const fs::path fifo = dir_ / "pipe";
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
   const std::string f = fifo.string();
