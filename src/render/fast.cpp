@@ -103,7 +103,8 @@ struct TileWork {
   bool exhausted[kTileRays];  // its march has ended
   int active[kTileRays];      // the open rays
   uint32_t begin[kTileRays], end[kTileRays];
-  std::vector<FastSample> samples;
+  std::vector<FastSample> samples;  // the round's samples: [0, n_samples) (the vector only grows)
+  size_t n_samples = 0;
   std::vector<MarchSample> group_samples;  // fast_march_group's output
   std::vector<int32_t> group_blocks;
   std::vector<FastSampleOut> outs;
@@ -176,7 +177,8 @@ class TileRenderer {
     for (int round = 0, per_ray = kFirstRoundSamples;; ++round, per_ray = std::min(2 * per_ray, kMaxRoundSamples)) {
       // Traversal: each open ray's next samples, contiguous per ray.
       if (n_active == 0) break;
-      w.samples.clear();
+      w.n_samples = 0;
+      if (w.samples.size() < size_t(n_active) * size_t(per_ray)) w.samples.resize(size_t(n_active) * size_t(per_ray));
       // Rays already dimmed below kDimTransmittance ask for fewer samples.
       int group[2][kFastMarchGroup], g[2] = {0, 0};
       const int limit[2] = {per_ray, std::min(per_ray, kDimRoundSamples)};
@@ -193,7 +195,7 @@ class TileRenderer {
       for (int c = 0; c < 2; ++c)
         if (g[c] > 0) gather(w, group[c], g[c], limit[c], tot);
       if (profile_) traversal += since(t);
-      if (!w.samples.empty()) {
+      if (w.n_samples > 0) {
         if (!encoded && fm_.dir_dims > 0) {
           w.dir.resize(size_t(fm_.dir_dims) * kTileRays);
           fast_encode_directions(fm_, w.dx, w.dy, w.dz, kTileRays, w.dir.data(), kTileRays);
@@ -202,17 +204,18 @@ class TileRenderer {
         group_by_mlp(w);
         if (profile_) traversal += since(t);
         // Interpolation and MLPs, one coarse voxel's batch at a time.
-        w.outs.resize(w.samples.size());
+        if (w.outs.size() < w.n_samples) w.outs.resize(w.n_samples);
         for (uint32_t u : w.used) {
           fast_eval_batch(fm_, u, w.samples.data(), w.order.data() + w.first[u], w.count[u], w.dir.data(), kTileRays,
                           delta_, w.outs.data(), profile_ ? &kernel : nullptr);
           w.count[u] = 0;
         }
-        tot.profile.mlp_samples += w.samples.size();
+        tot.profile.mlp_samples += w.n_samples;
         if (profile_) t = Clock::now();
       }
       // Compositing, each ray in sample order; the rays that stay open.
       int still_open = 0;
+      uint64_t composited = 0;
       for (int a = 0; a < n_active; ++a) {
         const int r = w.active[a];
         if (w.exhausted[r]) w.open[r] = false;
@@ -222,13 +225,14 @@ class TileRenderer {
           const float weight = T * o.alpha;
           for (int c = 0; c < 3; ++c) w.rgb[r][c] += weight * o.rgb[c];
           T *= o.trans;
-          ++tot.stats.samples;
+          ++composited;
         }
         w.T[r] = T;
         if (T < s_.transmittance_min) w.open[r] = false;
         if (w.open[r]) w.active[still_open++] = r;
       }
       n_active = still_open;
+      tot.stats.samples += composited;
       if (profile_) compositing += since(t);
     }
     for (int r = 0; r < n; ++r) {
@@ -260,17 +264,20 @@ class TileRenderer {
     for (int i = 0; i < g; ++i) {
       const int r = group[i];
       if (ended[i]) w.exhausted[r] = true;
-      w.begin[r] = uint32_t(w.samples.size());
+      w.begin[r] = uint32_t(w.n_samples);
+      const MarchSample* ms = w.group_samples.data() + size_t(i) * size_t(limit);
+      const int32_t* mb = w.group_blocks.data() + size_t(i) * size_t(limit);
       for (int j = 0; j < counts[i]; ++j) {
-        const MarchSample& s = w.group_samples[size_t(i) * size_t(limit) + size_t(j)];
-        const int32_t block = w.group_blocks[size_t(i) * size_t(limit) + size_t(j)];
-        const Vec3i& v = s.voxel;
-        const int32_t mlp = m_.coarse_to_mlp[linear_index(v.x / kCvMicro, v.y / kCvMicro, v.z / kCvMicro, cr)];
+        const MarchSample& s = ms[j];
+        const int32_t block = mb[j];
+        const Vec3i& v = s.voxel;  // non-negative: unsigned division is a shift
+        const int32_t mlp = m_.coarse_to_mlp[linear_index(int(unsigned(v.x) / kCvMicro), int(unsigned(v.y) / kCvMicro),
+                                                          int(unsigned(v.z) / kCvMicro), cr)];
         if (mlp < 0 || block < 0) {
           ++tot.missing;
           continue;
         }
-        FastSample f;
+        FastSample& f = w.samples[w.n_samples++];
         f.ray = uint32_t(r);
         f.mlp = uint32_t(mlp);
         const int lx = v.x & (kMicroPerFine - 1), ly = v.y & (kMicroPerFine - 1), lz = v.z & (kMicroPerFine - 1);
@@ -279,9 +286,8 @@ class TileRenderer {
         f.fx = s.p_micro.x - float(v.x);
         f.fy = s.p_micro.y - float(v.y);
         f.fz = s.p_micro.z - float(v.z);
-        w.samples.push_back(f);
       }
-      w.end[r] = uint32_t(w.samples.size());
+      w.end[r] = uint32_t(w.n_samples);
     }
   }
 
@@ -293,17 +299,19 @@ class TileRenderer {
       w.first.assign(m_.mlp_count(), 0);
     }
     w.used.clear();
-    for (const FastSample& f : w.samples)
-      if (w.count[f.mlp]++ == 0) w.used.push_back(f.mlp);
+    const FastSample* samples = w.samples.data();
+    const uint32_t n = uint32_t(w.n_samples);
+    for (uint32_t i = 0; i < n; ++i)
+      if (w.count[samples[i].mlp]++ == 0) w.used.push_back(samples[i].mlp);
     uint32_t at = 0;
     for (uint32_t u : w.used) {
       w.first[u] = at;
       at += w.count[u];
       w.count[u] = 0;
     }
-    w.order.resize(w.samples.size());
-    for (uint32_t i = 0; i < w.samples.size(); ++i) {
-      const uint32_t u = w.samples[i].mlp;
+    if (w.order.size() < n) w.order.resize(n);
+    for (uint32_t i = 0; i < n; ++i) {
+      const uint32_t u = samples[i].mlp;
       w.order[w.first[u] + w.count[u]++] = i;
     }
   }

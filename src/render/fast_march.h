@@ -77,6 +77,16 @@ class FastMarcher {
     int64_t k = 0, k_end = -1;  // next candidate to consider; the last one
     int64_t chunk_k = 0;        // first candidate of the last chunk tested
     uint32_t pending = 0;       // its samples not handed out yet: bit i for candidate chunk_k + i
+    bool dense = false;         // the last chunk tested held a sample: test the next one without a lookup
+    // The last chunk's samples in order, as the vector test found them: the
+    // candidate's lane (k - chunk_k), point, micro voxel and fine voxel
+    // index; entries [found_next, found_next + popcount(pending)) are pending.
+    static constexpr int kMaxChunk = 16;
+    int found_next = 0;
+    alignas(64) int32_t found_lane[kMaxChunk];
+    alignas(64) float found_p[3][kMaxChunk];
+    alignas(64) int32_t found_v[3][kMaxChunk];
+    alignas(64) int32_t found_fine[kMaxChunk];
     uint64_t checks = 0;
     int32_t block = -1;
 

@@ -19,7 +19,7 @@ namespace edrnr {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
-using DF = hn::CappedTag<float, 16>;  // at most 16 candidates per test: the lanes fit a 32-bit mask
+using DF = hn::CappedTag<float, FastMarcher::State::kMaxChunk>;  // at most 16 candidates per test: a 32-bit mask
 using DI = hn::RebindToSigned<DF>;
 using DU = hn::RebindToUnsigned<DF>;
 
@@ -59,17 +59,32 @@ HWY_INLINE bool Occupied(const Vec3i& v, const Grid& g) {
 
 // Bit i set iff candidate k + i (i < count <= Lanes) is a sample: its point
 // p_k (the reference's float operations, lane by lane) lies in the grid and
-// its micro voxel is occupied.
-uint32_t TestCandidates(const FastMarcher::State& st, const Grid& g, int64_t k, int count) {
+// its micro voxel is occupied. The samples' lanes, points, voxels and fine
+// voxels go to st.found_* in order (found_next reset to 0).
+uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int count) {
   const DF df;
   const DI di;
   const DU du;
   const MicroRay& r = st.ray;
+  st.found_next = 0;
   if (k + int64_t(hn::Lanes(df)) >= kVectorKLimit) {  // far along a ray: one candidate at a time
     uint32_t bits = 0;
+    int n = 0;
     for (int i = 0; i < count; ++i) {
       Vec3i v;
-      if (VoxelOf(r.point(k + i), g, v) && Occupied(v, g)) bits |= uint32_t(1) << i;
+      const Vec3f p = r.point(k + i);
+      if (VoxelOf(p, g, v) && Occupied(v, g)) {
+        bits |= uint32_t(1) << i;
+        st.found_lane[n] = i;
+        st.found_p[0][n] = p.x;
+        st.found_p[1][n] = p.y;
+        st.found_p[2][n] = p.z;
+        st.found_v[0][n] = v.x;
+        st.found_v[1][n] = v.y;
+        st.found_v[2][n] = v.z;
+        st.found_fine[n] = int32_t(FineIndex(v, g.fine_res));
+        ++n;
+      }
     }
     return bits;
   }
@@ -103,6 +118,47 @@ uint32_t TestCandidates(const FastMarcher::State& st, const Grid& g, int64_t k, 
   hn::StoreMaskBits(du, samples, bytes);
   uint32_t bits;
   std::memcpy(&bits, bytes, sizeof(bits));
+  // The samples' lanes packed to the front, in order: one compress per
+  // vector where AVX-512 has it as an instruction, lane by lane elsewhere
+  // (other targets emulate it at far greater cost).
+  if (bits == 0) return bits;
+#if HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
+  {
+    const auto m = hn::RebindMask(di, samples);
+    const auto mf = hn::RebindMask(df, samples);
+    hn::StoreU(hn::Compress(lane, m), di, st.found_lane);
+    hn::StoreU(hn::Compress(px, mf), df, st.found_p[0]);
+    hn::StoreU(hn::Compress(py, mf), df, st.found_p[1]);
+    hn::StoreU(hn::Compress(pz, mf), df, st.found_p[2]);
+    hn::StoreU(hn::Compress(vx, m), di, st.found_v[0]);
+    hn::StoreU(hn::Compress(vy, m), di, st.found_v[1]);
+    hn::StoreU(hn::Compress(vz, m), di, st.found_v[2]);
+    hn::StoreU(hn::Compress(fine, m), di, st.found_fine);
+  }
+#else
+  {
+    constexpr int kM = FastMarcher::State::kMaxChunk;
+    alignas(64) float lp[3][kM];
+    alignas(64) int32_t lv[4][kM];
+    hn::Store(px, df, lp[0]);
+    hn::Store(py, df, lp[1]);
+    hn::Store(pz, df, lp[2]);
+    hn::Store(vx, di, lv[0]);
+    hn::Store(vy, di, lv[1]);
+    hn::Store(vz, di, lv[2]);
+    hn::Store(fine, di, lv[3]);
+    int n = 0;
+    for (uint32_t b = bits; b != 0; b &= b - 1, ++n) {
+      const int i = std::countr_zero(b);
+      st.found_lane[n] = i;
+      for (int a = 0; a < 3; ++a) {
+        st.found_p[a][n] = lp[a][i];
+        st.found_v[a][n] = lv[a][i];
+      }
+      st.found_fine[n] = lv[3][i];
+    }
+  }
+#endif
   return bits;
 }
 
@@ -116,16 +172,29 @@ constexpr int kChunkBelow = 2;
 HWY_INLINE int Emit(FastMarcher::State& st, const Grid& g, MarchSample* out, int32_t* blocks, int room) {
   int n = 0;
   while (st.pending != 0 && n < room) {
-    const int i = std::countr_zero(st.pending);
     st.pending &= st.pending - 1;
+    const int j = st.found_next++;
     MarchSample& s = out[n];
-    s.k = st.chunk_k + i;
-    s.p_micro = st.ray.point(s.k);
-    VoxelOf(s.p_micro, g, s.voxel);  // inside: TestCandidates found it occupied
-    st.block = g.fine_to_block[FineIndex(s.voxel, g.fine_res)];
+    s.k = st.chunk_k + st.found_lane[j];
+    s.p_micro = Vec3f{st.found_p[0][j], st.found_p[1][j], st.found_p[2][j]};
+    s.voxel = Vec3i{st.found_v[0][j], st.found_v[1][j], st.found_v[2][j]};
+    st.block = g.fine_to_block[st.found_fine[j]];
     blocks[n++] = st.block;
   }
   return n;
+}
+
+// Tests the vector of candidates from st.k on (st.k <= st.k_end): they
+// become the pending samples, and the next chunk is tested at once if any
+// of them is a sample.
+HWY_INLINE void TestChunk(FastMarcher::State& st, const Grid& g) {
+  const int64_t k = st.k;
+  const int count = int(std::min<int64_t>(int64_t(hn::Lanes(DF())), st.k_end - k + 1));
+  st.pending = TestCandidates(st, g, k, count);
+  st.dense = st.pending != 0;
+  st.chunk_k = k;
+  st.k = k + count;
+  st.checks += uint64_t(count);
 }
 
 // One unit of a marcher's work when nothing is pending: skip an empty cube of
@@ -134,6 +203,10 @@ HWY_INLINE int Emit(FastMarcher::State& st, const Grid& g, MarchSample* out, int
 HWY_INLINE bool Advance(FastMarcher::State& st, const Grid& g) {
   if (st.k > st.k_end) return false;
   const int64_t k = st.k;
+  if (st.dense) {  // near occupied micro voxels: the next chunk is likely to hold samples too
+    TestChunk(st, g);
+    return true;
+  }
   Vec3i v;
   if (!VoxelOf(st.ray.point(k), g, v)) {
     st.k = k + 1;
@@ -146,11 +219,7 @@ HWY_INLINE bool Advance(FastMarcher::State& st, const Grid& g) {
     st.k = st.skip_box(k, lo, 4 * (2 * r - 1));
     return true;
   }
-  const int count = int(std::min<int64_t>(int64_t(hn::Lanes(DF())), st.k_end - k + 1));
-  st.pending = TestCandidates(st, g, k, count);
-  st.chunk_k = k;
-  st.k = k + count;
-  st.checks += uint64_t(count);
+  TestChunk(st, g);
   return true;
 }
 

@@ -79,6 +79,7 @@ TEST(Fast, MarchYieldsTheReferenceSamples) {
               if (!more) break;
               ASSERT_EQ(a.k, b.k);
               ASSERT_EQ(a.voxel, b.voxel);
+              ASSERT_EQ(a.p_micro, b.p_micro);
               ++total;
             }
           }
@@ -86,6 +87,38 @@ TEST(Fast, MarchYieldsTheReferenceSamples) {
       EXPECT_GT(total, 200u) << res << " " << step;
     }
   }
+}
+
+// From a camera so far away that the candidate indices pass 2^30 (where the
+// vector test gives way to one candidate at a time), the samples are still
+// the reference's.
+TEST(Fast, MarchFarFromTheObjectYieldsTheReferenceSamples) {
+  const SceneModel m = several_model(256, false);
+  const FastSkipGrid skip(m);
+  const float delta = sample_spacing(m, 1.f);
+  size_t total = 0;
+  int64_t k_max = 0;
+  for (const Camera& cam : {orbit_camera(21, 21, 30, 20, 1.5e7, 1.6e-5), orbit_camera(21, 21, 150, -10, 2e7, 1.2e-5)})
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        const Ray ray = cam.pixel_ray(x, y);
+        const MicroRay mr = make_micro_ray(m, ray, delta);
+        SampleMarcher ref(m, ray, mr, true);
+        FastMarcher fast(m, skip, ray, mr);
+        MarchSample a, b;
+        for (;;) {
+          const bool more = ref.next(a);
+          ASSERT_EQ(fast.next(b), more) << x << "," << y;
+          if (!more) break;
+          ASSERT_EQ(a.k, b.k);
+          ASSERT_EQ(a.voxel, b.voxel);
+          ASSERT_EQ(a.p_micro, b.p_micro);
+          k_max = std::max(k_max, a.k);
+          ++total;
+        }
+      }
+  EXPECT_GT(total, 0u);
+  EXPECT_GT(k_max, int64_t(1) << 30);
 }
 
 // The renderer's grouped march (four rays interleaved, a few samples per
