@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <limits>
 
 #include "core/error.h"
 
@@ -14,11 +15,10 @@ namespace {
 template <class Pred>
 int64_t first_true(int64_t lo, int64_t hi, Pred pred) {
   while (lo < hi) {
-    int64_t mid = lo + (hi - lo) / 2;
-    if (pred(mid))
-      hi = mid;
-    else
-      lo = mid + 1;
+    const int64_t mid = lo + (hi - lo) / 2;
+    const bool p = pred(mid);
+    hi = p ? mid : hi;  // conditional moves: the outcome is unpredictable
+    lo = p ? lo : mid + 1;
   }
   return lo;
 }
@@ -31,10 +31,9 @@ uint64_t first_true_steps(int64_t lo, int64_t hi, int64_t e) {
   while (lo < hi) {
     const int64_t mid = lo + (hi - lo) / 2;
     ++steps;
-    if (mid >= e)
-      hi = mid;
-    else
-      lo = mid + 1;
+    const bool p = mid >= e;
+    hi = p ? mid : hi;
+    lo = p ? lo : mid + 1;
   }
   return steps;
 }
@@ -72,10 +71,93 @@ RayMath::RayMath(const FloatFormat& fmt, double step_micro, int micro_res)
   const size_t entries = size_t(std::min(reach, double(int64_t(1) << 18)));
   t_table_.resize(entries);
   for (size_t k = 0; k < entries; ++k) t_table_[k] = t_exact(int64_t(k));
+  make_thresholds();
+}
+
+void RayMath::make_thresholds() {
+  // For f in [1, Rm): the midpoint between f and the format value below it
+  // (a quarter step below f when f is a power of two: the spacing halves
+  // there), checked against round() itself. Every real x below mid lies at
+  // or below its double predecessor after the fused multiply-add's round to
+  // odd (mid has at most p + 2 significant bits, so its last double bit is
+  // even), likewise above, and round() is monotone: the three checks prove
+  // the threshold for every sum.
+  std::vector<Threshold> th(static_cast<size_t>(micro_res_));
+  const double inf = std::numeric_limits<double>::infinity();
+  for (int f = 1; f < micro_res_; ++f) {
+    const double F = double(f);
+    const int e = std::bit_width(unsigned(f)) - 1;  // f in [2^e, 2^(e+1))
+    const double step = std::ldexp(1.0, e + 1 - fmt_.significand_bits());
+    const double mid = std::has_single_bit(unsigned(f)) ? F - 0.25 * step : F - 0.5 * step;
+    const bool below_ok = fmt_.round(std::nextafter(mid, -inf)) < F;
+    const bool above_ok = fmt_.round(std::nextafter(mid, inf)) >= F;
+    if (!below_ok || !above_ok || fmt_.round(F) != F) return;  // no fast tests for this format
+    th[size_t(f)] = {mid, fmt_.round(mid) >= F};
+  }
+  thresholds_ = std::move(th);
 }
 
 int64_t RayMath::cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& c, int cell_micro,
                            uint64_t* evals) const {
+  if (thresholds_.empty()) return cell_exit_rounded(r, k0, k_end, c, cell_micro, evals);
+  // The search of cell_exit_rounded, each position tested against the
+  // thresholds of the cell's faces instead of rounded, and its evaluations
+  // counted from the answer (a bisection's path follows from it).
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  int64_t best = k_end;
+  uint64_t n = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double d = r.dir[a];
+    if (d == 0.0) continue;  // the coordinate never changes
+    const int first = c[a] * cell_micro, last = first + cell_micro - 1;
+    const double face = d > 0 ? double((c[a] + 1) * cell_micro) : double(c[a] * cell_micro);
+    if ((d > 0 && face >= double(micro_res_)) || (d < 0 && face <= 0.0))
+      continue;                            // the last cell: only the box ends it
+    const int64_t lo = k0 + 1, hi = best;  // only an exit before `best` matters
+    if (lo >= hi) break;
+    // Outside: micro voxel below `first` or above `last` (micro_index clamps
+    // to [0, Rm), so a cell touching the grid's side has no face there).
+    const double o = r.origin[a];
+    const Threshold low = first > 0 ? thresholds_[size_t(first)] : Threshold{-kInf, true};
+    const Threshold high = last + 1 < micro_res_ ? thresholds_[size_t(last + 1)] : Threshold{kInf, false};
+    auto outside = [&](int64_t k) {
+      const double prod = d * t_of(k), s = prod + o;
+      return !sum_at_least(prod, o, s, low) || sum_at_least(prod, o, s, high);
+    };
+    const double guess = std::ceil((face - o) / (d * step_) - 0.5);
+    const int64_t g = std::isfinite(guess) ? int64_t(std::clamp(guess, double(lo), double(hi - 1))) : hi - 1;
+    int64_t e;
+    if (outside(g)) {
+      if (g == lo) {
+        e = g;
+        n += 1;
+      } else if (!outside(g - 1)) {
+        e = g;
+        n += 2;
+      } else {
+        e = first_true(lo, g - 1, outside);
+        n += 2 + first_true_steps(lo, g - 1, e);
+      }
+    } else {
+      if (g + 1 >= hi) {
+        e = g + 1;
+        n += 1;
+      } else if (outside(g + 1)) {
+        e = g + 1;
+        n += 2;
+      } else {
+        e = first_true(g + 2, hi, outside);
+        n += 2 + first_true_steps(g + 2, hi, e);
+      }
+    }
+    best = std::min(best, e);
+  }
+  if (evals) *evals += n;
+  return best;
+}
+
+int64_t RayMath::cell_exit_rounded(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& c, int cell_micro,
+                                   uint64_t* evals) const {
   int64_t best = k_end;
   for (int a = 0; a < 3; ++a) {
     const double d = r.dir[a];
@@ -107,10 +189,63 @@ int64_t RayMath::cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Ve
 }
 
 KInterval RayMath::box_interval(const ChipRay& r, const Vec3d& lo, const Vec3d& hi, uint64_t* evals) const {
+  PreparedBox box;
+  box.lo = lo;
+  box.hi = hi;  // no fast axes: every position rounded
+  return box_interval(r, box, evals);
+}
+
+bool RayMath::find_threshold(double v, bool strict, Threshold& out) const {
+  // Doubles in order as unsigned integers (the negative ones below the
+  // positive ones, -0 just below +0).
+  auto key = [](double x) {
+    const uint64_t b = std::bit_cast<uint64_t>(x);
+    return (b >> 63) ? ~b : b | (uint64_t(1) << 63);
+  };
+  auto value = [](uint64_t k) { return std::bit_cast<double>((k >> 63) ? k & ~(uint64_t(1) << 63) : ~k); };
+  auto passes = [&](double x) { return strict ? fmt_.round(x) > v : fmt_.round(x) >= v; };
+  const double big = std::numeric_limits<double>::max();
+  if (!passes(big)) return false;
+  // The least double that passes (round() is monotone), by bisection.
+  uint64_t lo = key(-big), hi = key(big);
+  while (lo < hi) {
+    const uint64_t mid = lo + (hi - lo) / 2;
+    if (passes(value(mid)))
+      hi = mid;
+    else
+      lo = mid + 1;
+  }
+  // The fused multiply-add rounds the exact sum to odd at double precision
+  // first: a sum strictly between b's predecessor and b becomes the odd one
+  // of the two. With b even it becomes the predecessor (which does not
+  // pass), so the sum must reach b; with b odd it becomes b, so any sum above
+  // the predecessor passes.
+  const double b = value(lo);
+  if (lo == key(-big))
+    out = {-std::numeric_limits<double>::infinity(), true};  // every finite sum passes
+  else if ((std::bit_cast<uint64_t>(b) & 1) == 0)
+    out = {b, true};
+  else
+    out = {value(lo - 1), false};
+  return true;
+}
+
+RayMath::PreparedBox RayMath::prepare_box(const Vec3d& lo, const Vec3d& hi) const {
+  PreparedBox box;
+  box.lo = lo;
+  box.hi = hi;
+  for (int a = 0; a < 3; ++a)
+    box.fast[size_t(a)] = find_threshold(lo[a], false, box.at_least_lo[size_t(a)]) &&
+                          find_threshold(hi[a], true, box.above_hi[size_t(a)]);
+  return box;
+}
+
+KInterval RayMath::box_interval(const ChipRay& r, const PreparedBox& box, uint64_t* evals) const {
   // The TSPS bisects each bound over [0, kMaxCandidate). The bounds are found
   // here from the ray's distance to each face, checked exactly (the
   // coordinate is monotone in k, so the first k past a face is unique), and
   // the bisection's evaluations are counted as the hardware makes them.
+  const Vec3d &lo = box.lo, &hi = box.hi;
   KInterval out{0, kMaxCandidate};
   for (int a = 0; a < 3; ++a) {
     const double d = r.dir[a];
@@ -120,9 +255,27 @@ KInterval RayMath::box_interval(const ChipRay& r, const Vec3d& lo, const Vec3d& 
       continue;
     }
     // Inside along this axis: a run [enter, leave) of k (the coordinate is monotone).
-    auto k_at = [&](double face) { return std::ceil((face - r.origin[a]) / (d * step_) - 0.5); };
+    const double o = r.origin[a];
+    auto k_at = [&](double face) { return std::ceil((face - o) / (d * step_) - 0.5); };
     int64_t enter, leave;
-    if (d > 0) {
+    if (box.fast[size_t(a)]) {
+      const Threshold at_lo = box.at_least_lo[size_t(a)], past_hi = box.above_hi[size_t(a)];
+      auto at_least_lo = [&](int64_t k) {
+        const double prod = d * t_of(k);
+        return sum_at_least(prod, o, prod + o, at_lo);
+      };
+      auto above_hi = [&](int64_t k) {
+        const double prod = d * t_of(k);
+        return sum_at_least(prod, o, prod + o, past_hi);
+      };
+      if (d > 0) {
+        enter = first_true_from(0, kMaxCandidate, k_at(lo[a]), at_least_lo);
+        leave = first_true_from(enter, kMaxCandidate, k_at(hi[a]), above_hi);
+      } else {
+        enter = first_true_from(0, kMaxCandidate, k_at(hi[a]), [&](int64_t k) { return !above_hi(k); });
+        leave = first_true_from(enter, kMaxCandidate, k_at(lo[a]), [&](int64_t k) { return !at_least_lo(k); });
+      }
+    } else if (d > 0) {
       enter = first_true_from(0, kMaxCandidate, k_at(lo[a]), [&](int64_t k) { return coord(r, k, a) >= lo[a]; });
       leave = first_true_from(enter, kMaxCandidate, k_at(hi[a]), [&](int64_t k) { return coord(r, k, a) > hi[a]; });
     } else {

@@ -16,6 +16,7 @@
 // A point belongs to micro voxel min(floor(p), Rm - 1) per axis when
 // 0 <= p <= Rm (the reference renderer's convention), and to the cell of a
 // tier with cells of S micro voxels given by that micro voxel divided by S.
+#include <array>
 #include <bit>
 #include <cstdint>
 #include <vector>
@@ -74,7 +75,39 @@ class RayMath {
     }
     return {m.x / cell_micro, m.y / cell_micro, m.z / cell_micro};
   }
-  Vec3i cell_at(const ChipRay& r, int64_t k, int cell_micro) const { return cell(point(r, k), cell_micro); }
+  Vec3i cell_at(const ChipRay& r, int64_t k, int cell_micro) const {
+    const Vec3i m = micro_voxel_at(r, k);
+    if (std::has_single_bit(unsigned(cell_micro))) {
+      const int s = std::countr_zero(unsigned(cell_micro));
+      return {m.x >> s, m.y >> s, m.z >> s};
+    }
+    return {m.x / cell_micro, m.y / cell_micro, m.z / cell_micro};
+  }
+
+  // Whether micro_index(coord(r, k, a)) >= f, decided from the double sum
+  // d t_k + o against the rounding threshold of f (see thresholds_), without
+  // rounding the coordinate. Always true for f <= 0, never for f >= Rm.
+  bool micro_at_least(const ChipRay& r, int64_t k, int a, int f) const {
+    if (f <= 0) return true;
+    if (f >= micro_res_) return false;
+    if (thresholds_.empty()) return micro_index(coord(r, k, a)) >= f;
+    const double o = r.origin[a], prod = r.dir[a] * t_of(k);
+    return sum_at_least(prod, o, prod + o, f);
+  }
+  // micro_index(coord(r, k, a)), exactly.
+  int micro_index_at(const ChipRay& r, int64_t k, int a) const {
+    if (thresholds_.empty()) return micro_index(coord(r, k, a));
+    const double o = r.origin[a], prod = r.dir[a] * t_of(k), s = prod + o;
+    // The sum's truncation is a guess that rounding moves by at most one voxel.
+    int m = s >= 0.0 ? (s < double(micro_res_) ? int(s) : micro_res_ - 1) : 0;
+    while (m > 0 && !sum_at_least(prod, o, s, m)) --m;
+    while (m + 1 < micro_res_ && sum_at_least(prod, o, s, m + 1)) ++m;
+    return m;
+  }
+  // micro_voxel(point(r, k)), exactly.
+  Vec3i micro_voxel_at(const ChipRay& r, int64_t k) const {
+    return {micro_index_at(r, k, 0), micro_index_at(r, k, 1), micro_index_at(r, k, 2)};
+  }
 
   // The first candidate k in (k0, k_end) whose point is not in `cell` (cells
   // of cell_micro micro voxels), or k_end if the ray stays in it. The point of
@@ -89,13 +122,59 @@ class RayMath {
   // [lo, hi] (micro units), found exactly by bisection on each axis bound.
   KInterval box_interval(const ChipRay& r, const Vec3d& lo, const Vec3d& hi, uint64_t* evals = nullptr) const;
 
+  // Where a fused multiply-add's result round(x) of the exact sum x reaches
+  // a value: round(x) passes it exactly when x > mid, or x == mid and tie_up.
+  struct Threshold {
+    double mid = 0;
+    bool tie_up = false;
+  };
+  // Whether the sum x = prod + o, of which s is the double rounding, passes
+  // h. Rounding to double is monotone and mid is a double, so s decides
+  // unless s == mid, where the sum's exact error (TwoSum) does.
+  static bool sum_at_least(double prod, double o, double s, const Threshold& h) {
+    if (s != h.mid) return s > h.mid;
+    const double bv = s - prod;
+    const double err = (prod - (s - bv)) + (o - bv);
+    return err > 0.0 || (err == 0.0 && h.tie_up);
+  }
+  // The threshold of "round(x) >= v" (strict: "round(x) > v") for this
+  // format's fused multiply-add; false if no finite sum passes it.
+  bool find_threshold(double v, bool strict, Threshold& out) const;
+
+  // A box with the thresholds of its faces, for repeated box_interval calls.
+  struct PreparedBox {
+    Vec3d lo, hi;
+    std::array<Threshold, 3> at_least_lo, above_hi;  // coordinate >= lo, coordinate > hi
+    std::array<bool, 3> fast{};                      // false: that axis rounds each position
+  };
+  PreparedBox prepare_box(const Vec3d& lo, const Vec3d& hi) const;
+  // box_interval(r, box.lo, box.hi, evals), the same result and count.
+  KInterval box_interval(const ChipRay& r, const PreparedBox& box, uint64_t* evals = nullptr) const;
+
  private:
   double t_exact(int64_t k) const { return fmt_.mul(fmt_.round(double(k) + 0.5), step_); }
+
+  // For the exact sum x = prod + o of which s is the double rounding, whether
+  // round(x) >= f for an integer f in [1, Rm) (thresholds_ must be filled).
+  // round() is monotone, so round(x) >= f exactly when x lies past the
+  // threshold mid_f (or on it when mid_f itself rounds up); mid_f is a double
+  // and rounding to double is monotone too, so s decides unless s == mid_f,
+  // where the sum's exact error (TwoSum) does.
+  bool sum_at_least(double prod, double o, double s, int f) const {
+    return sum_at_least(prod, o, s, thresholds_[size_t(f)]);
+  }
+  // Fills thresholds_, or leaves it empty (then every test rounds) if the
+  // format has no threshold of the expected kind for some f.
+  void make_thresholds();
+  // cell_exit with every position rounded (formats without thresholds).
+  int64_t cell_exit_rounded(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& cell, int cell_micro,
+                            uint64_t* evals) const;
 
   FloatFormat fmt_;
   double step_;
   int micro_res_;
-  std::vector<double> t_table_;  // t_exact(k) for k in [0, size)
+  std::vector<double> t_table_;        // t_exact(k) for k in [0, size)
+  std::vector<Threshold> thresholds_;  // by f in [0, Rm) (entry 0 unused); empty: no fast tests
 };
 
 }  // namespace edrnr::chip

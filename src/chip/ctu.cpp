@@ -26,11 +26,14 @@ Ctu::Step coarse_step(const SceneModel& model, const RayMath& math, bool lag_fir
     if (!(live >> r & 1)) continue;
     const RayState& ray = rp.rays[size_t(r)];
     if (!(known.valid >> r & 1) || known.k[size_t(r)] != ray.k) {
-      known.cell[size_t(r)] = math.cell_at(ray.ray, ray.k, kCoarseCellMicro);
+      const Vec3i c = math.cell_at(ray.ray, ray.k, kCoarseCellMicro);
+      known.cell[size_t(r)] = c;
       known.k[size_t(r)] = ray.k;
       known.valid |= uint8_t(1u << r);
+      cv[size_t(r)] = c;
+    } else {
+      cv[size_t(r)] = known.cell[size_t(r)];
     }
-    cv[size_t(r)] = known.cell[size_t(r)];
   }
   const LfauSelection sel = lfau_select(cv, live, rp.travel_sign, lag_first);
   ++counters.iterations;

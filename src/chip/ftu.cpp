@@ -11,10 +11,11 @@ constexpr int kLeafCellMicro = 2;
 
 int micro_bit(int lx, int ly, int lz) { return lx + kMicroPerFine * (ly + kMicroPerFine * lz); }
 
+// Whether any of the 8 micro bits of leaf voxel (leaf_x, leaf_y, leaf_z) is set.
 bool leaf_occupied(uint64_t word, int leaf_x, int leaf_y, int leaf_z) {
-  for (int c = 0; c < 8; ++c)
-    if (word >> micro_bit(2 * leaf_x + (c & 1), 2 * leaf_y + (c >> 1 & 1), 2 * leaf_z + (c >> 2 & 1)) & 1) return true;
-  return false;
+  // The leaf's bits, at its corner (0, 0, 0): x + 4 y + 16 z for x, y, z in {0, 1}.
+  constexpr uint64_t kLeafBits = 0x330033;
+  return (word & (kLeafBits << micro_bit(2 * leaf_x, 2 * leaf_y, 2 * leaf_z))) != 0;
 }
 }  // namespace
 
@@ -58,12 +59,15 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
     for (int r = 0; r < kRaysPerPacket; ++r) {
       const RayState& ray = rp.rays[size_t(r)];
       if (!ray.live()) continue;
+      Vec3i f;
       if (!(known >> r & 1) || known_k[size_t(r)] != ray.k) {
-        known_f[size_t(r)] = math_.cell_at(ray.ray, ray.k, kMicroPerFine);
+        f = math_.cell_at(ray.ray, ray.k, kMicroPerFine);
+        known_f[size_t(r)] = f;
         known_k[size_t(r)] = ray.k;
         known |= uint8_t(1u << r);
+      } else {
+        f = known_f[size_t(r)];
       }
-      const Vec3i f = known_f[size_t(r)];
       const Vec3i c{f.x / kFinePerCoarse, f.y / kFinePerCoarse, f.z / kFinePerCoarse};
       if (linear_index(c.x, c.y, c.z, cr) != cv_tag) continue;
       active |= uint8_t(1u << r);
@@ -101,8 +105,11 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
       const int64_t k_exit =
           math_.cell_exit(ray.ray, ray.k, ray.k_end, sel.voxel, kMicroPerFine, &counters_.position_evals);
       int64_t k = ray.k;
+      Vec3i m;
+      bool m_known = false;  // m is already the micro voxel of candidate k (evaluated again, counted again)
       while (k < k_exit) {
-        const Vec3i m = math_.micro_voxel(math_.point(ray.ray, k));
+        if (!m_known) m = math_.micro_voxel_at(ray.ray, k);
+        m_known = false;
         ++counters_.position_evals;
         const Vec3i leaf{(m.x - base.x) / 2, (m.y - base.y) / 2, (m.z - base.z) / 2};
         ++counters_.leaf_checks;
@@ -115,10 +122,14 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
         const Vec3i leaf_cell{m.x / kLeafCellMicro, m.y / kLeafCellMicro, m.z / kLeafCellMicro};
         Vec3i last_micro{-1, -1, -1};
         bool last_occupied = false;
-        for (; k < k_exit; ++k) {
-          const Vec3i mk = math_.micro_voxel(math_.point(ray.ray, k));
+        for (bool first = true; k < k_exit; ++k, first = false) {
+          const Vec3i mk = first ? m : math_.micro_voxel_at(ray.ray, k);
           ++counters_.position_evals;
-          if (Vec3i{mk.x / kLeafCellMicro, mk.y / kLeafCellMicro, mk.z / kLeafCellMicro} != leaf_cell) break;
+          if (Vec3i{mk.x / kLeafCellMicro, mk.y / kLeafCellMicro, mk.z / kLeafCellMicro} != leaf_cell) {
+            m = mk;
+            m_known = true;
+            break;
+          }
           ++counters_.candidate_tests;
           if (mk != last_micro) {
             ++counters_.micro_checks;

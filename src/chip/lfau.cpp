@@ -10,8 +10,40 @@ LfauSelection lfau_select(const std::array<Vec3i, kRaysPerPacket>& voxel, uint8_
                           bool lag_first) {
   LfauSelection out;
   if (active_mask == 0) return out;
-  uint8_t candidates = active_mask;
   if (lag_first) {
+    // EN1, EN2, EN3 at once: the most lagging voxel is the least of the
+    // oriented (X, Y, Z) in lexicographic order, compared as one packed key
+    // (21 bits per axis, offset to be non-negative). Equal keys are equal
+    // voxels, so the winners are the rays whose key is the least.
+    constexpr int kField = 21;
+    constexpr int kOffset = 1 << (kField - 1);
+    std::array<uint64_t, kRaysPerPacket> key{};
+    uint64_t best = ~uint64_t(0);
+    int lead = -1;
+    bool packed = true;
+    for (int r = 0; r < kRaysPerPacket; ++r) {
+      if (!(active_mask >> r & 1)) continue;
+      uint64_t k = 0;
+      for (int axis = 0; axis < 3; ++axis) {
+        const int oriented = voxel[size_t(r)][axis] * travel_sign[axis];
+        packed &= oriented >= -kOffset && oriented < kOffset;
+        k = k << kField | uint64_t(uint32_t(oriented + kOffset) & ((1u << kField) - 1));
+      }
+      key[size_t(r)] = k;
+      if (k < best) {  // strictly less: the lowest-numbered ray of a tie leads
+        best = k;
+        lead = r;
+      }
+    }
+    if (packed) {
+      out.voxel = voxel[size_t(lead)];
+      for (int r = 0; r < kRaysPerPacket; ++r)
+        if ((active_mask >> r & 1) && key[size_t(r)] == best) out.selected_mask |= uint8_t(1u << r);
+      return out;
+    }
+  }
+  uint8_t candidates = active_mask;
+  if (lag_first) {  // voxel indices too large to pack: axis by axis
     // EN1, EN2, EN3: keep the rays that lag most along X, then Y, then Z.
     for (int axis = 0; axis < 3; ++axis) {
       int best = 0;

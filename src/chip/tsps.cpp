@@ -2,8 +2,9 @@
 
 namespace edrnr::chip {
 
-Tsps::Tsps(const RayMath& math, const Vec3d& box_lo, const Vec3d& box_hi) : math_(math), lo_(box_lo), hi_(box_hi) {}
+Tsps::Tsps(const RayMath& math, const Vec3d& box_lo, const Vec3d& box_hi)
+    : math_(math), box_(math.prepare_box(box_lo, box_hi)) {}
 
-KInterval Tsps::search(const ChipRay& ray) { return math_.box_interval(ray, lo_, hi_, &evals_); }
+KInterval Tsps::search(const ChipRay& ray) { return math_.box_interval(ray, box_, &evals_); }
 
 }  // namespace edrnr::chip

@@ -26,7 +26,7 @@ class Tsps {
 
  private:
   const RayMath& math_;
-  Vec3d lo_, hi_;
+  RayMath::PreparedBox box_;
   uint64_t evals_ = 0;
 };
 

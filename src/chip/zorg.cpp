@@ -1,5 +1,6 @@
 #include "chip/zorg.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/error.h"
@@ -132,14 +133,31 @@ RayGenerator::RayGenerator(const Camera& camera, const Box3f& scene_box, int mic
     origin_m_[a] = tf_.round(rf_.mul(rf_.sub(rf_.round(o[a]), rf_.round(double(scene_box.lo[a]))), scale));
     dir_scale_[a] = rf_.round(double(size.x) / double(size[a]));
   }
+  const int columns = std::clamp(camera.width, 0, kMaxImageSide), rows = std::clamp(camera.height, 0, kMaxImageSide);
+  column_terms_.resize(size_t(columns));
+  row_terms_.resize(size_t(rows));
+  for (int x = 0; x < columns; ++x) column_terms_[size_t(x)] = column_term(x);
+  for (int y = 0; y < rows; ++y) row_terms_[size_t(y)] = row_term(y);
+  for (int i = 0; i < 3; ++i) z_term_[i] = rf_.mul(rot_[i][2], -1.0);
+}
+
+Vec3d RayGenerator::column_term(int x) const {
+  const double cam_x = rf_.div(rf_.sub(rf_.round(x + 0.5), cx_), fx_);
+  return {rf_.mul(rot_[0][0], cam_x), rf_.mul(rot_[1][0], cam_x), rf_.mul(rot_[2][0], cam_x)};
+}
+
+Vec3d RayGenerator::row_term(int y) const {
+  const double cam_y = rf_.neg(rf_.div(rf_.sub(rf_.round(y + 0.5), cy_), fy_));
+  return {rf_.mul(rot_[0][1], cam_y), rf_.mul(rot_[1][1], cam_y), rf_.mul(rot_[2][1], cam_y)};
 }
 
 GeneratedRay RayGenerator::generate(int x, int y) const {
-  const double u = rf_.round(x + 0.5), v = rf_.round(y + 0.5);
-  const double cam[3] = {rf_.div(rf_.sub(u, cx_), fx_), rf_.neg(rf_.div(rf_.sub(v, cy_), fy_)), -1.0};
+  // w = R d_cam, summed in the order (x term + y term) + z term.
+  const bool inside = x >= 0 && y >= 0 && size_t(x) < column_terms_.size() && size_t(y) < row_terms_.size();
+  const Vec3d col = inside ? column_terms_[size_t(x)] : column_term(x);
+  const Vec3d row = inside ? row_terms_[size_t(y)] : row_term(y);
   Vec3d w;
-  for (int i = 0; i < 3; ++i)
-    w[i] = rf_.add(rf_.add(rf_.mul(rot_[i][0], cam[0]), rf_.mul(rot_[i][1], cam[1])), rf_.mul(rot_[i][2], cam[2]));
+  for (int i = 0; i < 3; ++i) w[i] = rf_.add(rf_.add(col[i], row[i]), z_term_[i]);
   const double len = rf_.sqrt(rf_.add(rf_.add(rf_.mul(w.x, w.x), rf_.mul(w.y, w.y)), rf_.mul(w.z, w.z)));
   GeneratedRay g;
   for (int a = 0; a < 3; ++a) {

@@ -21,6 +21,7 @@
 // pixels of one row, rows top to bottom; the last RP of a row may be partial.
 #include <array>
 #include <cstdint>
+#include <vector>
 
 #include "chip/chip_ray.h"
 #include "core/custom_float.h"
@@ -111,11 +112,22 @@ class RayGenerator {
   std::array<GeneratedRay, kRaysPerPacket> generate(const PixelQuad& quad) const;
 
  private:
+  // R's first column times d_cam.x of column x, its second times d_cam.y of
+  // row y (one rounding per product): the products of R d_cam that depend on
+  // x or y alone.
+  Vec3d column_term(int x) const;
+  Vec3d row_term(int y) const;
+
   FloatFormat rf_, tf_;
   double cx_, cy_, fx_, fy_;
   double rot_[3][3];
   Vec3d origin_m_;   // camera origin in micro units
   Vec3d dir_scale_;  // box_size_x / box_size per axis
+  // column_term / row_term of the camera's image columns and rows, computed
+  // once (pixels outside the image compute theirs), and R's third column
+  // times d_cam.z = -1.
+  std::vector<Vec3d> column_terms_, row_terms_;
+  Vec3d z_term_;
 };
 
 }  // namespace edrnr::chip
