@@ -4,6 +4,7 @@
 #include <array>
 #include <vector>
 
+#include "chip/cfiu_kernel.h"
 #include "core/error.h"
 
 namespace edrnr::chip {
@@ -16,6 +17,10 @@ Cfiu::Cfiu(const SceneModel& model, const ChipNumerics& numerics, const FeatureC
   if (model.feature_quant.zero_point.size() != size_t(channels_))
     fail("model feature quantization has {} zero points for {} channels", model.feature_quant.zero_point.size(),
          channels_);
+  // zero_point[c] 2^(3 fb): the zero point times the coefficients' sum.
+  for (int c = 0; c < channels_; ++c)
+    zero_point_sum_.push_back(int64_t(model.feature_quant.zero_point[size_t(c)]) *
+                              (int64_t(1) << (3 * numerics.interp_fraction_bits)));
 }
 
 void Cfiu::interpolate(uint32_t block, const SampleCoord& s, int32_t* out) {
@@ -26,9 +31,14 @@ void Cfiu::interpolate(uint32_t block, const SampleCoord& s, int32_t* out) {
 int Cfiu::read_corners(uint32_t block, const SampleCoord& s) {
   const int line = cache_.use(block);
   // Each bank serves its corners; the coefficients are reordered to meet them.
-  const std::array<int, 8> banks = cache_.layout().corner_banks(line, s.local);
-  for (int c = 0; c < 8; ++c) ++counters_.bank_reads[size_t(banks[size_t(c)])];
-  const int conflicts = BankLayout::conflict_cycles(banks);
+  int conflicts = 0;
+  if (cache_.layout().corners_one_per_bank()) {
+    for (uint64_t& reads : counters_.bank_reads) ++reads;
+  } else {
+    const std::array<int, 8> banks = cache_.layout().corner_banks(line, s.local);
+    for (int c = 0; c < 8; ++c) ++counters_.bank_reads[size_t(banks[size_t(c)])];
+    conflicts = BankLayout::conflict_cycles(banks);
+  }
   ++counters_.samples;
   counters_.corner_reads += 8;
   counters_.fetch_cycles += uint64_t(1 + conflicts);
@@ -57,6 +67,40 @@ void Cfiu::weighted_sum(uint32_t block, const SampleCoord& s, int32_t* out) cons
   const int64_t coef_sum = int64_t(1) << (3 * fb);
   const int shift = 3 * fb - numerics_.interp_feature_frac_bits;
   const uint8_t* q4 = model_.features_q4.data();  // two codes a byte, the even index low
+  // Whole bytes per corner and sums that fit int32 (15 * 2^(3 fb) < 2^31):
+  // the SIMD kernel, channels in pairs, then the same rounding per channel.
+  constexpr size_t kKernelChannels = 64;
+  const bool in_voxel =
+      s.frac[0] >= 0 && s.frac[0] <= one && s.frac[1] >= 0 && s.frac[1] <= one && s.frac[2] >= 0 && s.frac[2] <= one;
+  if (F % 2 == 0 && F <= kKernelChannels && 3 * fb <= 27 && in_voxel) {
+    std::array<size_t, 8> byte_first;
+    std::array<int32_t, 8> coef32;
+    for (size_t i = 0; i < 8; ++i) {
+      byte_first[i] = first[i] >> 1;
+      coef32[i] = int32_t(coef[i]);
+    }
+    std::array<int32_t, kKernelChannels / 2> even, odd;
+    cfiu_corner_sums(q4, byte_first.data(), coef32.data(), F / 2, even.data(), odd.data());
+    const fx::Rounding mode = numerics_.rounding;
+    if (shift >= 1 && shift <= 62 && (mode == fx::Rounding::Floor || mode == fx::Rounding::HalfUp)) {
+      // fx::shift_right_round in these modes: floor((sum + half) / 2^shift).
+      const int64_t half = mode == fx::Rounding::HalfUp ? int64_t(1) << (shift - 1) : 0;
+      const int64_t lo = fx::min_signed(numerics_.interp_feature_bits),
+                    hi = fx::max_signed(numerics_.interp_feature_bits);
+      for (size_t ch = 0; ch < F; ++ch) {
+        const int64_t raw = (ch & 1) ? odd[ch >> 1] : even[ch >> 1];
+        const int64_t r = (raw - zero_point_sum_[ch] + half) >> shift;
+        out[ch] = int32_t(r < lo ? lo : (r > hi ? hi : r));
+      }
+      return;
+    }
+    for (size_t ch = 0; ch < F; ++ch) {
+      const int64_t raw = (ch & 1) ? odd[ch >> 1] : even[ch >> 1];
+      const int64_t sum = raw - zero_point_sum_[ch];
+      out[ch] = int32_t(fx::saturate(fx::shift_right_round(sum, shift, mode), numerics_.interp_feature_bits));
+    }
+    return;
+  }
   // Corner by corner, two channels a byte where the codes pair up; integer
   // sums, so the order does not change them.
   constexpr size_t kLocalChannels = 64;

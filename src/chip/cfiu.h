@@ -66,6 +66,7 @@ class Cfiu {
   ChipNumerics numerics_;
   FeatureCache cache_;
   int channels_;
+  std::vector<int64_t> zero_point_sum_;  // per channel: zero_point * 2^(3 interp_fraction_bits)
   CfiuCounters counters_;
 };
 

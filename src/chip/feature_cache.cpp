@@ -97,10 +97,7 @@ FeatureCache::FeatureCache(const FeatureCacheConfig& config)
   lines_.resize(size_t(config.lines));
 }
 
-int FeatureCache::find(uint32_t block) const {
-  auto it = index_.find(block);
-  return it == index_.end() ? -1 : it->second;
-}
+int FeatureCache::find(uint32_t block) const { return block < line_of_.size() ? line_of_[block] : -1; }
 
 bool FeatureCache::present(uint32_t block) const {
   int l = find(block);
@@ -156,14 +153,15 @@ CacheAccess FeatureCache::request(uint32_t block) {
   }
   Line& line = lines_[size_t(victim)];
   if (line.state == State::Valid) {
-    index_.erase(line.block);
+    line_of_[line.block] = -1;
     ++counters_.evictions;
   }
   line.state = State::Pending;
   line.block = block;
   line.reserved = 1;
   line.last_use = ++clock_;
-  index_[block] = victim;
+  if (block >= line_of_.size()) line_of_.resize(size_t(block) + 1, -1);
+  line_of_[block] = victim;
   mshr_.push_back(block);
   ++counters_.misses;
   counters_.peak_mshr_used = std::max<uint64_t>(counters_.peak_mshr_used, mshr_.size());

@@ -61,6 +61,10 @@ class BankLayout {
   std::array<int, 8> corner_banks(int line, const Vec3i& micro_in_fine) const;
   // Extra cycles a fetch of those 8 corners needs: (most corners in one bank) - 1.
   static int conflict_cycles(const std::array<int, 8>& banks);
+  // True when every micro voxel's 8 corners lie in 8 different banks, one
+  // each (balanced and direct: the corners' vertex types differ in their axis
+  // parities), so a fetch reads each bank once and never conflicts.
+  bool corners_one_per_bank() const { return mapping_ != BankMapping::Linear; }
 
  private:
   BankMapping mapping_;
@@ -140,7 +144,7 @@ class FeatureCache {
   FeatureCacheConfig config_;
   BankLayout layout_;
   std::vector<Line> lines_;
-  std::unordered_map<uint32_t, int> index_;  // block -> line, for pending and valid lines
+  std::vector<int32_t> line_of_;  // block -> line for pending and valid lines, -1 for none (grown to the largest block)
   std::vector<uint32_t> mshr_;
   uint64_t clock_ = 0;
   FeatureCacheCounters counters_;

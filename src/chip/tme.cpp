@@ -25,6 +25,25 @@ fx::Requant requant_or_fail(double scale, int bits, size_t mlp, const char* what
   }
 }
 
+// A multiplier and shift the 64-bit kernels take (tme_kernel.h).
+bool kernel_requant(const fx::Requant& q) {
+  return q.multiplier >= 0 && q.multiplier == int32_t(q.multiplier) && q.shift >= 0 && q.shift <= 62;
+}
+
+TmeRequantRow requant_row(const std::vector<fx::Requant>& qs, const ChipNumerics& n) {
+  TmeRequantRow row;
+  row.vector = n.rounding == fx::Rounding::Floor || n.rounding == fx::Rounding::HalfUp;
+  for (const fx::Requant& q : qs) row.vector = row.vector && kernel_requant(q);
+  if (!row.vector) return row;
+  row.bias.assign(qs.size(), 0);
+  for (const fx::Requant& q : qs) {
+    row.mult.push_back(uint32_t(q.multiplier));
+    row.shift.push_back(uint64_t(q.shift));
+    row.half.push_back(n.rounding == fx::Rounding::HalfUp ? (uint64_t(1) << q.shift) >> 1 : 0);
+  }
+  return row;
+}
+
 std::vector<TmeLayer> compile_net(const std::vector<DenseQ>& net, const std::vector<int>& widths, size_t mlp,
                                   const char* name, const ChipNumerics& n) {
   if (net.size() + 1 != widths.size())
@@ -78,13 +97,22 @@ std::vector<TmeLayer> compile_net(const std::vector<DenseQ>& net, const std::vec
       t.bias_saturations += b != t.bias[size_t(j)];
       t.sum_exact[size_t(j)] = std::abs(b) + t.abs_weight_sum[size_t(j)] * x_max <= fx::max_signed(A);
     }
-    t.requant_vector = hidden && A <= 32 && (n.rounding == fx::Rounding::Floor || n.rounding == fx::Rounding::HalfUp);
-    for (int j = 0; j < t.out && t.requant_vector; ++j) {
-      const fx::Requant& q = t.requant[size_t(j)];
-      t.requant_vector = t.sum_exact[size_t(j)] && q.multiplier >= 0 && q.multiplier == int32_t(q.multiplier) &&
-                         q.shift >= 0 && q.shift <= 62;
+    bool kernel = A <= 32 && (n.rounding == fx::Rounding::Floor || n.rounding == fx::Rounding::HalfUp);
+    bool exact = true;
+    for (int j = 0; j < t.out; ++j) {
+      kernel = kernel && kernel_requant(t.requant[size_t(j)]);
+      exact = exact && t.sum_exact[size_t(j)];
     }
-    if (t.requant_vector) {
+    t.requant_kernel = kernel;
+    t.requant_vector = kernel && exact && hidden;
+    t.requant_signed = kernel && exact && !hidden;
+    t.needs_bound = !exact;
+    if (!exact) {
+      t.wt_abs = t.wt;
+      for (int32_t& w : t.wt_abs) w = std::abs(w);
+    }
+    if (kernel) {
+      t.zero32.assign(size_t(t.out_pad), 0);
       t.requant_rounding = n.rounding;
       const size_t P = size_t(t.out_pad);
       t.bias32.assign(P, 0);
@@ -124,6 +152,8 @@ TmeMlp compile_tme_mlp(const SceneModel& model, size_t index, const ChipNumerics
                              "density-to-colour input");
   m.dir_in = requant_or_fail(direction_step(n) / c_in, n.requant_multiplier_bits, index, "direction partial sum");
   m.stored_bytes = arch.q8_bytes();
+  m.feature_row = requant_row(m.feature_in, n);
+  m.geo_row = requant_row(std::vector<fx::Requant>(size_t(m.density.back().out), m.geo_in), n);
   return m;
 }
 
@@ -197,6 +227,8 @@ void Tme::eval_batch(size_t samples, const int32_t* features, const TmeDirection
     act_b_.resize(need);
     sum_main_.resize(need);
     sum_dir_.resize(need);
+    abs_x_.resize(need);
+    abs_sum_.resize(need);
   }
   switch (n_.rounding) {
     case fx::Rounding::Floor:
@@ -230,14 +262,37 @@ void Tme::layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32
     counters_.saturations += saturations;
     return;
   }
+  if (!hidden && split < 0 && L.requant_signed && L.requant_rounding == M) {
+    // An output layer with exact sums: bias, requantization and saturation
+    // as the loop below does them, several neurons at a time.
+    saturations += tme_requant_signed(sum_main_.data(), W, samples, size_t(L.out), L.bias32.data(), L.mult32.data(),
+                                      L.half64.data(), L.shift64.data(), out_bits, y, W);
+    counters_.macs += uint64_t(L.in) * uint64_t(L.out) * samples;
+    counters_.saturations += saturations;
+    return;
+  }
+  // The bound |bias| + sum |w| |x| of every partial sum of each neuron and
+  // sample, when the weights alone do not rule saturation out.
+  const bool bound = L.needs_bound;
+  if (bound) {
+    for (size_t s = 0; s < samples; ++s)
+      for (int i = 0; i < main_in; ++i) abs_x_[s * W + size_t(i)] = std::abs(x[s * W + size_t(i)]);
+    tme_dot_columns(L.wt_abs.data(), size_t(L.out_pad), 0, size_t(main_in), abs_x_.data(), W, samples, abs_sum_.data(),
+                    W);
+  }
+  const int64_t acc_max = fx::max_signed(A);
+  // The requantization in the kernels once the accumulators are formed (they
+  // go into sum_main_, in place).
+  const bool kernel = L.requant_kernel && L.requant_rounding == M;
   for (size_t s = 0; s < samples; ++s) {
     const int32_t* xs = x + s * W;
-    const int32_t* main_sum = &sum_main_[s * W];
+    int32_t* main_sum = &sum_main_[s * W];
     const int32_t* dir_sum = &sum_dir_[s * W];
+    const int32_t* abs_sum = &abs_sum_[s * W];
     int32_t* ys = y + s * W;
     for (int j = 0; j < L.out; ++j) {
       int64_t acc = L.bias_sat[size_t(j)];
-      if (L.sum_exact[size_t(j)]) {
+      if (L.sum_exact[size_t(j)] || (bound && std::abs(acc) + abs_sum[j] <= acc_max)) {
         // No partial sum can reach the accumulator's limits: saturating after
         // each addition would change nothing.
         acc += main_sum[j];
@@ -259,12 +314,26 @@ void Tme::layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32
         acc = fx::saturate(sum, A);
         saturations += acc != sum;
       }
+      if (kernel) {
+        main_sum[j] = int32_t(acc);  // |acc| < 2^31: the accumulator has at most 32 bits
+        continue;
+      }
       const int64_t v = hidden ? std::max<int64_t>(acc, 0) : acc;
       const int64_t r = fx::requantize<M>(v, L.requant[size_t(j)]);
       const int64_t o = fx::saturate(r, out_bits);
       ys[j] = int32_t(o);
       saturations += o != r;
     }
+  }
+  if (kernel) {
+    // The ReLU (hidden), requantization and saturation the loop above leaves,
+    // several neurons at a time.
+    if (hidden)
+      saturations += tme_requant_relu(sum_main_.data(), W, samples, L.zero32.data(), L.mult32.data(), L.half64.data(),
+                                      L.shift64.data(), size_t(L.out_pad), out_bits, y, W);
+    else
+      saturations += tme_requant_signed(sum_main_.data(), W, samples, size_t(L.out), L.zero32.data(), L.mult32.data(),
+                                        L.half64.data(), L.shift64.data(), out_bits, y, W);
   }
   counters_.macs += uint64_t(L.in) * uint64_t(L.out) * samples;
   counters_.saturations += saturations;
@@ -285,9 +354,16 @@ void Tme::eval_batch_as(size_t samples, const int32_t* features, const TmeDirect
   const int F = model_.feature_channels;
   int32_t* x = act_a_.data();
   int32_t* y = act_b_.data();
-  for (size_t s = 0; s < samples; ++s)
-    for (int c = 0; c < F; ++c)
-      x[s * W + size_t(c)] = in_stage(features[s * size_t(F) + size_t(c)], m.feature_in[size_t(c)]);
+  const bool row_kernels = n_.rounding == M;  // the rows were made for the current rounding
+  if (row_kernels && m.feature_row.vector) {
+    saturations +=
+        tme_requant_signed(features, size_t(F), samples, size_t(F), m.feature_row.bias.data(),
+                           m.feature_row.mult.data(), m.feature_row.half.data(), m.feature_row.shift.data(), act, x, W);
+  } else {
+    for (size_t s = 0; s < samples; ++s)
+      for (int c = 0; c < F; ++c)
+        x[s * W + size_t(c)] = in_stage(features[s * size_t(F) + size_t(c)], m.feature_in[size_t(c)]);
+  }
   for (size_t l = 0; l < m.density.size(); ++l) {
     const bool hidden = l + 1 < m.density.size();
     layer_batch<M>(m.density[l], samples, x, y, hidden, hidden ? act : outb, -1, nullptr);
@@ -295,10 +371,15 @@ void Tme::eval_batch_as(size_t samples, const int32_t* features, const TmeDirect
   }
   // Colour net input: density outputs, then the direction encoding.
   const int G = m.density.back().out;
+  const bool geo_kernel = row_kernels && m.geo_row.vector;
+  if (geo_kernel)
+    saturations += tme_requant_signed(x, W, samples, size_t(G), m.geo_row.bias.data(), m.geo_row.mult.data(),
+                                      m.geo_row.half.data(), m.geo_row.shift.data(), act, y, W);
   for (size_t s = 0; s < samples; ++s) {
     out[s].raw_density = x[s * W];
     out[s].alpha = alpha_lut_(out[s].raw_density);
-    for (int g = 0; g < G; ++g) y[s * W + size_t(g)] = in_stage(x[s * W + size_t(g)], m.geo_in);
+    if (!geo_kernel)
+      for (int g = 0; g < G; ++g) y[s * W + size_t(g)] = in_stage(x[s * W + size_t(g)], m.geo_in);
     const TmeDirection& d = *dirs[s];
     std::copy(d.x.begin(), d.x.end(), y + s * W + size_t(G));
     saturations += d.saturations;

@@ -60,6 +60,29 @@ struct TmeLayer {
   std::vector<uint32_t> mult32;
   std::vector<uint64_t> shift64;
   std::vector<uint64_t> half64;  // 2^shift / 2 for half-up rounding, 0 for floor
+  // An output layer under the same conditions: its requantization runs as
+  // tme_requant_signed on the same arrays.
+  bool requant_signed = false;
+  // Every multiplier below 2^31 with a shift in [0, 62], an accumulator of at
+  // most 32 bits and floor or half-up rounding (requant_rounding): once the
+  // accumulators are formed, whatever their sums, the requantization runs in
+  // the kernels with zero biases (mult32, shift64, half64 set, zero32 zeros).
+  bool requant_kernel = false;
+  std::vector<int32_t> zero32;
+  // Some neuron is not sum_exact: the weights' magnitudes, transposed as wt,
+  // bound each sample's partial sums (|bias| + sum |w| |x|).
+  bool needs_bound = false;
+  std::vector<int32_t> wt_abs;
+};
+
+// An input-stage requantization of `count` values as tme_requant_signed runs
+// it (zero biases); vector false when a multiplier, shift or the rounding
+// needs the scalar path.
+struct TmeRequantRow {
+  bool vector = false;
+  std::vector<int32_t> bias;
+  std::vector<uint32_t> mult;
+  std::vector<uint64_t> half, shift;
 };
 
 struct TmeMlp {
@@ -68,6 +91,8 @@ struct TmeMlp {
   fx::Requant geo_in;                   // raw density-net output -> colour net input
   fx::Requant dir_in;                   // first colour layer: direction partial sum -> accumulator units
   size_t stored_bytes = 0;              // q8_bytes + 4 bytes per input-stage multiplier
+  TmeRequantRow feature_row;            // feature_in, one per channel
+  TmeRequantRow geo_row;                // geo_in, once per density output
 };
 
 // The widest layer (inputs or outputs) the TME evaluates.
@@ -141,7 +166,7 @@ class Tme {
   const SceneModel& model_;
   ChipNumerics n_;
   // Scratch of eval_batch: activations and sums, kMaxLayerWidth per sample.
-  std::vector<int32_t> act_a_, act_b_, sum_main_, sum_dir_;
+  std::vector<int32_t> act_a_, act_b_, sum_main_, sum_dir_, abs_x_, abs_sum_;
   TmeDirection eval_dir_;  // eval()'s direction inputs
   std::vector<TmeMlp> mlps_;
   ActivationLut alpha_lut_, sigmoid_lut_;

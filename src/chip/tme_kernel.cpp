@@ -77,6 +77,57 @@ uint64_t RequantRelu(const int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t 
   return saturations;
 #endif
 }
+// tme_requant_signed (tme_kernel.h). The arithmetic shift is a logical one
+// between two complements by the sign (exact for negative values too).
+uint64_t RequantSigned(const int32_t* HWY_RESTRICT x, size_t x_stride, size_t samples, size_t count,
+                       const int32_t* HWY_RESTRICT bias, const uint32_t* HWY_RESTRICT mult,
+                       const uint64_t* HWY_RESTRICT half, const uint64_t* HWY_RESTRICT shift, int out_bits,
+                       int32_t* HWY_RESTRICT y, size_t y_stride) {
+  const int64_t hi = (int64_t(1) << (out_bits - 1)) - 1, lo = -hi - 1;
+  uint64_t saturations = 0;
+  size_t vector_end = 0;
+#if HWY_TARGET != HWY_SCALAR
+  const hn::ScalableTag<int64_t> d64;
+  const hn::RebindToUnsigned<decltype(d64)> du64;
+  const hn::Rebind<int32_t, decltype(d64)> d32h;
+  const hn::Rebind<uint32_t, decltype(d64)> du32h;
+  const hn::Repartition<int32_t, decltype(d64)> d32;
+  const size_t n = hn::Lanes(d64);
+  vector_end = count / n * n;
+  const auto hi_v = hn::Set(d64, hi), lo_v = hn::Set(d64, lo);
+  HWY_ALIGN int64_t lanes[HWY_MAX_BYTES / sizeof(int64_t)];
+  for (size_t s = 0; s < samples; ++s) {
+    const int32_t* xs = x + s * x_stride;
+    int32_t* ys = y + s * y_stride;
+    for (size_t j = 0; j < vector_end; j += n) {
+      const auto v =
+          hn::Add(hn::PromoteTo(d64, hn::LoadU(d32h, xs + j)), hn::PromoteTo(d64, hn::LoadU(d32h, bias + j)));
+      const auto m = hn::BitCast(d64, hn::PromoteTo(du64, hn::LoadU(du32h, mult + j)));
+      const auto p = hn::MulEven(hn::BitCast(d32, v), hn::BitCast(d32, m));
+      const auto t = hn::Add(p, hn::BitCast(d64, hn::LoadU(du64, half + j)));
+      const auto sign = hn::BroadcastSignBit(t);
+      const auto u = hn::BitCast(du64, hn::Xor(t, sign)) >> hn::LoadU(du64, shift + j);
+      const auto r = hn::Xor(hn::BitCast(d64, u), sign);
+      const auto c = hn::Min(hn::Max(r, lo_v), hi_v);
+      saturations += n - hn::CountTrue(d64, hn::Eq(r, c));
+      hn::Store(c, d64, lanes);
+      for (size_t l = 0; l < n; ++l) ys[j + l] = int32_t(lanes[l]);
+    }
+  }
+#endif
+  if (vector_end < count) {
+    for (size_t s = 0; s < samples; ++s)
+      for (size_t j = vector_end; j < count; ++j) {
+        const int64_t v = int64_t(x[s * x_stride + j]) + bias[j];
+        const int64_t r = (v * int64_t(mult[j]) + int64_t(half[j])) >> shift[j];
+        const int64_t c = r < lo ? lo : (r > hi ? hi : r);
+        saturations += c != r;
+        y[s * y_stride + j] = int32_t(c);
+      }
+  }
+  return saturations;
+}
+
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
 
 }  // namespace HWY_NAMESPACE
@@ -88,6 +139,7 @@ namespace edrnr::chip {
 
 HWY_EXPORT(DotColumns);
 HWY_EXPORT(RequantRelu);
+HWY_EXPORT(RequantSigned);
 HWY_EXPORT(TargetName);
 
 void tme_dot_columns(const int32_t* wt, size_t out_pad, size_t i_begin, size_t i_end, const int32_t* x, size_t x_stride,
@@ -100,6 +152,13 @@ uint64_t tme_requant_relu(const int32_t* sum, size_t sum_stride, size_t samples,
                           int out_bits, int32_t* y, size_t y_stride) {
   return HWY_DYNAMIC_DISPATCH(RequantRelu)(sum, sum_stride, samples, bias, mult, half, shift, out_pad, out_bits, y,
                                            y_stride);
+}
+
+uint64_t tme_requant_signed(const int32_t* x, size_t x_stride, size_t samples, size_t count, const int32_t* bias,
+                            const uint32_t* mult, const uint64_t* half, const uint64_t* shift, int out_bits, int32_t* y,
+                            size_t y_stride) {
+  return HWY_DYNAMIC_DISPATCH(RequantSigned)(x, x_stride, samples, count, bias, mult, half, shift, out_bits, y,
+                                             y_stride);
 }
 
 const char* tme_kernel_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }

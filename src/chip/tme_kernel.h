@@ -32,6 +32,19 @@ uint64_t tme_requant_relu(const int32_t* sum, size_t sum_stride, size_t samples,
                           const uint32_t* mult, const uint64_t* half, const uint64_t* shift, size_t out_pad,
                           int out_bits, int32_t* y, size_t y_stride);
 
+// The signed requantization of `count` values per row (any count; the last
+// partial vector lane by lane): for each of `samples` rows and each j < count,
+//   v = x[s * x_stride + j] + bias[j]                (int64; the caller's
+//       contract: v fits int32)
+//   r = floor((v * mult[j] + half[j]) / 2^shift[j])  (exact in 64 bits:
+//       mult < 2^31, shift <= 62, half <= 2^61)
+//   y[s * y_stride + j] = r saturated to a signed out_bits integer
+// Returns how many values were clamped. out_bits in [1, 32]. With half[j] =
+// 2^shift[j] / 2 (or 0) this is fx::requantize<HalfUp> (or <Floor>).
+uint64_t tme_requant_signed(const int32_t* x, size_t x_stride, size_t samples, size_t count, const int32_t* bias,
+                            const uint32_t* mult, const uint64_t* half, const uint64_t* shift, int out_bits, int32_t* y,
+                            size_t y_stride);
+
 // The SIMD target the dispatch picked (for benchmarks and reports).
 const char* tme_kernel_target();
 

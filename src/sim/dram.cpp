@@ -132,7 +132,13 @@ bool DramSystem::enqueue(DramOp op, uint64_t address, uint32_t bytes, uint64_t i
   uint64_t first = address >> burst_shift_;
   uint64_t last = (address + bytes - 1) >> burst_shift_;
   std::fill(channel_count_.begin(), channel_count_.end(), 0);
-  for (uint64_t b = first; b <= last; ++b) ++channel_count_[locate(b << burst_shift_).channel];
+  if (config_.channels == 1) {
+    channel_count_[0] = uint32_t(last - first + 1);  // every burst in the one channel
+  } else {
+    const int i = static_cast<int>(AddressField::kChannel);
+    const uint64_t mask = (uint64_t{1} << field_bits_[i]) - 1;
+    for (uint64_t b = first; b <= last; ++b) ++channel_count_[(b >> field_shift_[i]) & mask];
+  }
   bool fits = true;
   for (uint32_t ch = 0; ch < config_.channels; ++ch) {
     if (channel_count_[ch] > config_.queue_depth_bursts) {

@@ -20,6 +20,7 @@ TEST(BankLayout, VertexTypeCountsAreTheOnesOfA5CubedBlock) {
 
 void check_conflict_free_and_unique(BankMapping mapping, int lines) {
   BankLayout layout(mapping, lines);
+  EXPECT_TRUE(layout.corners_one_per_bank()) << bank_mapping_name(mapping);
   for (int line = 0; line < lines; ++line)
     for (int z = 0; z < 4; ++z)
       for (int y = 0; y < 4; ++y)
@@ -67,6 +68,7 @@ TEST(BankLayout, LinearLayoutConflicts) {
   auto banks = layout.corner_banks(0, {0, 0, 0});
   EXPECT_EQ(banks, (std::array<int, 8>{0, 1, 5, 6, 1, 2, 6, 7}));
   EXPECT_EQ(BankLayout::conflict_cycles(banks), 1);
+  EXPECT_FALSE(layout.corners_one_per_bank());
 }
 
 TEST(FeatureCache, MshrMergesDuplicateMissesAndStallsWhenFull) {

@@ -5,7 +5,9 @@
 #include <random>
 #include <vector>
 
+#include "chip/cfiu_kernel.h"
 #include "chip/tme_kernel.h"
+#include "core/fixed_point.h"
 
 namespace edrnr::chip {
 namespace {
@@ -44,6 +46,84 @@ TEST(TmeRequantRelu, MatchesTheScalarFormulaOnEveryTarget) {
               << tme_kernel_target() << " sample " << s << " neuron " << j << " rep " << rep;
         }
       ASSERT_EQ(clamped, expected_clamped) << tme_kernel_target() << " rep " << rep;
+    }
+  }
+  hwy::SetSupportedTargetsForTest(0);
+}
+
+// tme_requant_signed against fx::requantize (the exact 128-bit product and
+// its rounding) and fx::saturate, on random signed values, biases,
+// multipliers and shifts, with floor and half-up rounding, a row length that
+// leaves a partial vector, on every SIMD target this build has and the CPU
+// runs.
+TEST(TmeRequantSigned, MatchesRequantizeOnEveryTarget) {
+  constexpr size_t kStride = 64, kCount = 45, kSamples = 4;
+  std::mt19937_64 rng(11);
+  std::vector<int32_t> x(kStride * kSamples), bias(kCount), y(kStride * kSamples);
+  std::vector<uint32_t> mult(kCount);
+  std::vector<uint64_t> half(kCount), shift(kCount);
+  for (int64_t target : hwy::SupportedAndGeneratedTargets()) {
+    hwy::SetSupportedTargetsForTest(target);
+    for (int rep = 0; rep < 200; ++rep) {
+      const int out_bits = rep % 3 == 0 ? 8 : 16;
+      const fx::Rounding mode = rep % 2 ? fx::Rounding::HalfUp : fx::Rounding::Floor;
+      for (int32_t& v : x) v = int32_t(rng() % (1u << 21)) - (1 << 20);
+      std::vector<fx::Requant> q(kCount);
+      for (size_t j = 0; j < kCount; ++j) {
+        bias[j] = int32_t(rng() % (1u << 21)) - (1 << 20);
+        q[j] = {int64_t(rng() >> 33), int(rng() % 63)};  // multiplier below 2^31
+        mult[j] = uint32_t(q[j].multiplier);
+        shift[j] = uint64_t(q[j].shift);
+        half[j] = mode == fx::Rounding::HalfUp ? (uint64_t(1) << shift[j]) >> 1 : 0;
+      }
+      const uint64_t clamped = tme_requant_signed(x.data(), kStride, kSamples, kCount, bias.data(), mult.data(),
+                                                  half.data(), shift.data(), out_bits, y.data(), kStride);
+      uint64_t expected_clamped = 0;
+      for (size_t s = 0; s < kSamples; ++s)
+        for (size_t j = 0; j < kCount; ++j) {
+          const int64_t r = fx::requantize(int64_t(x[s * kStride + j]) + bias[j], q[j], mode);
+          const int64_t c = fx::saturate(r, out_bits);
+          expected_clamped += c != r;
+          ASSERT_EQ(y[s * kStride + j], c)
+              << tme_kernel_target() << " sample " << s << " value " << j << " rep " << rep;
+        }
+      ASSERT_EQ(clamped, expected_clamped) << tme_kernel_target() << " rep " << rep;
+    }
+  }
+  hwy::SetSupportedTargetsForTest(0);
+}
+
+// cfiu_corner_sums against its contract's formula, with the largest
+// coefficients the CFIU uses (2^24 in all) and row lengths with and without a
+// partial vector, on every target.
+TEST(CfiuCornerSums, MatchesTheScalarSumsOnEveryTarget) {
+  std::mt19937_64 rng(5);
+  std::vector<uint8_t> q4(4096);
+  for (uint8_t& b : q4) b = uint8_t(rng());
+  for (int64_t target : hwy::SupportedAndGeneratedTargets()) {
+    hwy::SetSupportedTargetsForTest(target);
+    for (size_t bytes : {size_t(1), size_t(8), size_t(13), size_t(32)}) {
+      for (int rep = 0; rep < 50; ++rep) {
+        size_t first[8];
+        int32_t coef[8];
+        int32_t left = int32_t(1) << 24;
+        for (int c = 0; c < 8; ++c) {
+          first[c] = rng() % (q4.size() - bytes);
+          coef[c] = c == 7 ? left : int32_t(rng() % uint64_t(left + 1));
+          left -= coef[c];
+        }
+        std::vector<int32_t> even(bytes), odd(bytes);
+        cfiu_corner_sums(q4.data(), first, coef, bytes, even.data(), odd.data());
+        for (size_t b = 0; b < bytes; ++b) {
+          int64_t e = 0, o = 0;
+          for (int c = 0; c < 8; ++c) {
+            e += int64_t(coef[c]) * (q4[first[c] + b] & 15);
+            o += int64_t(coef[c]) * (q4[first[c] + b] >> 4);
+          }
+          ASSERT_EQ(even[b], e) << tme_kernel_target() << " byte " << b;
+          ASSERT_EQ(odd[b], o) << tme_kernel_target() << " byte " << b;
+        }
+      }
     }
   }
   hwy::SetSupportedTargetsForTest(0);
