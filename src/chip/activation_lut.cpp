@@ -12,10 +12,9 @@ namespace {
 constexpr double kLn2Hi = 6.93147180369123816490e-01;
 constexpr double kLn2Lo = 1.90821492927058770002e-10;
 constexpr double kInvLn2 = 1.44269504088896338700e+00;
-// pi / 2 split the same way.
-constexpr double kPio2Hi = 1.57079632673412561417e+00;
-constexpr double kPio2Lo = 6.07710050650619224932e-11;
-constexpr double kInvPio2 = 6.36619772367581382433e-01;
+using det_trig_constants::kInvPio2;
+using det_trig_constants::kPio2Hi;
+using det_trig_constants::kPio2Lo;
 
 // sin and cos of |r| <= pi/4 by their Taylor series (terms below 1e-20).
 double sin_small(double r) {

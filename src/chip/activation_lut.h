@@ -14,6 +14,7 @@
 // Taylor series in IEEE double with only +, -, *, / (no library calls whose
 // last bit may differ between C libraries), so every machine builds the same
 // tables.
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -26,6 +27,17 @@ double det_exp(double x);
 double det_log(double x);  // x > 0
 double det_sin(double x);
 double det_cos(double x);
+// sin_out[i] = det_sin(x[i]) and cos_out[i] = det_cos(x[i]), the same bits,
+// several arguments at a time (SIMD lanes, runtime dispatch). Throws Error
+// for an argument outside det_sin's range.
+void det_sin_cos(const double* x, size_t count, double* sin_out, double* cos_out);
+
+// pi / 2 split so that n * kPio2Hi is exact for |n| < 2^20 (fdlibm's constants).
+namespace det_trig_constants {
+inline constexpr double kPio2Hi = 1.57079632673412561417e+00;
+inline constexpr double kPio2Lo = 6.07710050650619224932e-11;
+inline constexpr double kInvPio2 = 6.36619772367581382433e-01;
+}  // namespace det_trig_constants
 
 class ActivationLut {
  public:

@@ -162,11 +162,18 @@ std::vector<int32_t> Tme::encode_direction(const Vec3d& dir, int frequencies, co
   auto put = [&](double v) {
     out.push_back(int32_t(fx::to_fixed(v, n.direction_code_frac_bits, n.direction_code_bits, n.rounding)));
   };
+  out.reserve(3 + 6 * size_t(std::max(frequencies, 0)));
   for (int a = 0; a < 3; ++a) put(dir[a]);
+  // The sines and cosines of every frequency at once (det_sin_cos: the bits of det_sin / det_cos).
+  std::vector<double> arg, sin_v, cos_v;
+  for (int k = 0; k < frequencies; ++k)
+    for (int a = 0; a < 3; ++a) arg.push_back(std::ldexp(1.0, k) * dir[a]);
+  sin_v.resize(arg.size());
+  cos_v.resize(arg.size());
+  det_sin_cos(arg.data(), arg.size(), sin_v.data(), cos_v.data());
   for (int k = 0; k < frequencies; ++k) {
-    const double f = std::ldexp(1.0, k);
-    for (int a = 0; a < 3; ++a) put(det_sin(f * dir[a]));
-    for (int a = 0; a < 3; ++a) put(det_cos(f * dir[a]));
+    for (int a = 0; a < 3; ++a) put(sin_v[size_t(3 * k + a)]);
+    for (int a = 0; a < 3; ++a) put(cos_v[size_t(3 * k + a)]);
   }
   return out;
 }
