@@ -55,6 +55,31 @@ TEST(Fast, FloatPathMatchesTheReference) {
   }
 }
 
+// Marches every pixel ray of `cam` with both marchers and asserts the same
+// samples; adds the samples seen to *total and raises *k_max to the largest
+// candidate index.
+void expect_reference_samples(const SceneModel& m, const FastSkipGrid& skip, const Camera& cam, float delta,
+                              size_t* total, int64_t* k_max) {
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const Ray ray = cam.pixel_ray(x, y);
+      const MicroRay mr = make_micro_ray(m, ray, delta);
+      SampleMarcher ref(m, ray, mr, true);
+      FastMarcher fast(m, skip, ray, mr);
+      MarchSample a, b;
+      for (;;) {
+        const bool more = ref.next(a);
+        ASSERT_EQ(fast.next(b), more) << "pixel " << x << "," << y;
+        if (!more) break;
+        ASSERT_EQ(a.k, b.k);
+        ASSERT_EQ(a.voxel, b.voxel);
+        ASSERT_EQ(a.p_micro, b.p_micro);
+        *k_max = std::max(*k_max, a.k);
+        ++*total;
+      }
+    }
+}
+
 // The fast march yields exactly the reference march's samples (same k, same
 // point, same voxel), ray by ray, at several steps and from inside and outside
 // the object.
@@ -65,24 +90,11 @@ TEST(Fast, MarchYieldsTheReferenceSamples) {
     for (float step : {1.f, 0.43f, 2.5f}) {
       const float delta = sample_spacing(m, step);
       size_t total = 0;
+      int64_t k_max = 0;
       for (const Camera& cam : {views(23, 19)[0], views(23, 19)[2], orbit_camera(17, 17, 40, 10, 0.3, 120)}) {
-        for (int y = 0; y < cam.height; ++y)
-          for (int x = 0; x < cam.width; ++x) {
-            const Ray ray = cam.pixel_ray(x, y);
-            const MicroRay mr = make_micro_ray(m, ray, delta);
-            SampleMarcher ref(m, ray, mr, true);
-            FastMarcher fast(m, skip, ray, mr);
-            MarchSample a, b;
-            for (;;) {
-              const bool more = ref.next(a);
-              ASSERT_EQ(fast.next(b), more) << res << " " << step << " " << x << "," << y;
-              if (!more) break;
-              ASSERT_EQ(a.k, b.k);
-              ASSERT_EQ(a.voxel, b.voxel);
-              ASSERT_EQ(a.p_micro, b.p_micro);
-              ++total;
-            }
-          }
+        SCOPED_TRACE(testing::Message() << "res " << res << ", step " << step);
+        expect_reference_samples(m, skip, cam, delta, &total, &k_max);
+        if (HasFatalFailure()) return;
       }
       EXPECT_GT(total, 200u) << res << " " << step;
     }
@@ -98,25 +110,10 @@ TEST(Fast, MarchFarFromTheObjectYieldsTheReferenceSamples) {
   const float delta = sample_spacing(m, 1.f);
   size_t total = 0;
   int64_t k_max = 0;
-  for (const Camera& cam : {orbit_camera(21, 21, 30, 20, 1.5e7, 1.6e-5), orbit_camera(21, 21, 150, -10, 2e7, 1.2e-5)})
-    for (int y = 0; y < cam.height; ++y)
-      for (int x = 0; x < cam.width; ++x) {
-        const Ray ray = cam.pixel_ray(x, y);
-        const MicroRay mr = make_micro_ray(m, ray, delta);
-        SampleMarcher ref(m, ray, mr, true);
-        FastMarcher fast(m, skip, ray, mr);
-        MarchSample a, b;
-        for (;;) {
-          const bool more = ref.next(a);
-          ASSERT_EQ(fast.next(b), more) << x << "," << y;
-          if (!more) break;
-          ASSERT_EQ(a.k, b.k);
-          ASSERT_EQ(a.voxel, b.voxel);
-          ASSERT_EQ(a.p_micro, b.p_micro);
-          k_max = std::max(k_max, a.k);
-          ++total;
-        }
-      }
+  for (const Camera& cam : {orbit_camera(21, 21, 30, 20, 1.5e7, 1.6e-5), orbit_camera(21, 21, 150, -10, 2e7, 1.2e-5)}) {
+    expect_reference_samples(m, skip, cam, delta, &total, &k_max);
+    if (HasFatalFailure()) return;
+  }
   EXPECT_GT(total, 0u);
   EXPECT_GT(k_max, int64_t(1) << 30);
 }
