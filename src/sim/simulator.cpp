@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -133,7 +134,7 @@ class BatchArithmetic {
 };
 
 // Runs BatchArithmetic jobs in order on a second thread. Each side spins
-// briefly before it sleeps, and wakes the other only when that one sleeps, so
+// before it sleeps, and wakes the other only when that one sleeps, so
 // that a job costs no system call while both are busy.
 class Worker {
  public:
@@ -159,7 +160,7 @@ class Worker {
   }
   // Waits until job `seq` is done (its results are then visible).
   void wait(uint64_t seq) {
-    if (!spin_until([&] { return completed_.load() > seq; })) {
+    if (!spin_until([&] { return completed_.load() > seq; }, kMainSpin)) {
       main_sleeping_.store(true);
       for (uint64_t done = completed_.load(); done <= seq; done = completed_.load()) completed_.wait(done);
       main_sleeping_.store(false);
@@ -168,21 +169,28 @@ class Worker {
   }
 
  private:
+  // Polls `ready` for up to `budget` before the caller goes to sleep. The
+  // worker waits long (jobs come every few microseconds while a frame runs,
+  // and a wake-up through the kernel costs about as much as a small job); the
+  // main thread waits briefly.
   template <class Ready>
-  static bool spin_until(Ready ready) {
-    for (int i = 0; i < 256; ++i) {
-      if (ready()) return true;
+  static bool spin_until(Ready ready, std::chrono::microseconds budget) {
+    const auto deadline = std::chrono::steady_clock::now() + budget;
+    for (;;) {
+      for (int i = 0; i < 64; ++i) {
+        if (ready()) return true;
 #if defined(__x86_64__) || defined(__i386__)
-      __builtin_ia32_pause();
+        __builtin_ia32_pause();
 #endif
+      }
+      if (std::chrono::steady_clock::now() >= deadline) return ready();
     }
-    return ready();
   }
 
   void loop() {
     uint64_t next = 0;
     for (;;) {
-      if (!spin_until([&] { return submitted_.load() != next; })) {
+      if (!spin_until([&] { return submitted_.load() != next; }, kWorkerSpin)) {
         worker_sleeping_.store(true);
         for (uint64_t avail = submitted_.load(); avail == next; avail = submitted_.load()) submitted_.wait(avail);
         worker_sleeping_.store(false);
@@ -210,6 +218,7 @@ class Worker {
   std::atomic<bool> stop_{false}, worker_sleeping_{false}, main_sleeping_{false};
   std::exception_ptr error_;
   std::thread thread_;
+  static constexpr std::chrono::microseconds kMainSpin{100}, kWorkerSpin{2000};
 };
 
 class HitSeries {
