@@ -3,18 +3,16 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <atomic>
-#include <chrono>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
-#include <thread>
 
 #include "chip/chip_ray.h"
 #include "chip/front_end.h"
 #include "chip/rp_buffer.h"
 #include "chip/zorg.h"
 #include "core/error.h"
+#include "sim/batch_worker.h"
 #include "sim/cache.h"
 #include "sim/chrome_trace.h"
 #include "sim/fifo.h"
@@ -34,6 +32,9 @@ const char* const kUnitNames[kUnits] = {"front_end", "ctu", "ftu", "ooo_si", "cf
 // candidate indices, 776 bits, in 64-bit words of the "others" SRAM.
 constexpr uint64_t kRpTraversalStateWords = 13;
 
+// With two threads, how many front-end packets the worker may build ahead.
+constexpr size_t kFrontEndAheadPackets = 64;
+
 uint64_t ceil_div(uint64_t a, uint64_t b) { return (a + b - 1) / b; }
 
 double ratio(double a, double b) { return b > 0 ? a / b : 0.0; }
@@ -43,182 +44,6 @@ struct SampleToken {
   uint32_t rp = 0;
   bool first = false;  // first sample of its batch
   bool last = false;   // last sample of its batch
-};
-
-// An RP's batch from the FTU until its last sample leaves the VRU. The
-// arithmetic job (weighted sums, MLP, compositing) reads block, cv_tag, coords
-// and rays and writes stay; it may run on the worker thread in between.
-struct Flight {
-  uint32_t slot = 0;   // computation-SRAM slot of the batch (freed when the CFIU has read it)
-  uint32_t block = 0;  // feature block (its line stays reserved until then)
-  uint32_t cv_tag = 0;
-  std::vector<uint8_t> sample_cycles;  // CFIU cycles per sample (1 + bank conflicts)
-  std::vector<SampleCoord> coords;     // SCC output per sample
-  std::vector<uint8_t> rays;           // ray of each sample
-  bool stay = false;                   // a live ray is still in the CV: reschedule; else leave it
-  uint64_t job = 0;                    // job sequence number
-};
-
-// A live ray of the packet whose current candidate lies in CV `cv_tag`.
-bool has_live_ray_in(const RayMath& math, const SceneModel& model, const RayPacket& p, uint32_t cv_tag) {
-  for (const RayState& r : p.rays) {
-    if (!r.live()) continue;
-    const Vec3i c = math.cell_at(r.ray, r.k, kCoarseCellMicro);
-    if (linear_index(c.x, c.y, c.z, model.coarse_res()) == cv_tag) return true;
-  }
-  return false;
-}
-
-// The arithmetic of batches: interpolation sums, the TME and the VRU, with
-// their own unit instances, so that it can run on a thread of its own.
-class BatchArithmetic {
- public:
-  BatchArithmetic(const SceneModel& model, const ChipConfig& config, const ChipNumerics& n, const RayMath& math,
-                  const Cfiu& cfiu, double delta)
-      : model_(model),
-        n_(n),
-        math_(math),
-        cfiu_(cfiu),
-        tme_(model, n, delta, size_t(config.mlp_cache_bytes)),
-        vru_(n, config.transmittance_min, config.background) {}
-
-  // The interpolation sums of every sample, the TME on the whole batch (the
-  // direction inputs once per ray), then compositing in sample order.
-  void run(RayPacket& p, Flight& f) {
-    tme_.load(f.cv_tag);
-    const size_t n = f.coords.size(), F = size_t(model_.feature_channels);
-    if (features_.size() < n * F) features_.resize(n * F);
-    if (outputs_.size() < n) {
-      outputs_.resize(n);
-      dir_of_sample_.resize(n);
-    }
-    if (dirs_.size() < p.rays.size()) {
-      dirs_.resize(p.rays.size());
-      dir_batch_.resize(p.rays.size(), 0);
-    }
-    ++batch_;
-    for (size_t i = 0; i < n; ++i) {
-      const uint8_t r = f.rays[i];
-      if (dir_batch_[r] != batch_) {
-        RayState& ray = p.rays[r];
-        // The front end leaves the encoding to this thread (once per ray).
-        if (ray.dir_code.empty())
-          ray.dir_code = Tme::encode_direction(ray.world_dir, model_.mlp_arch.dir_frequencies, n_);
-        tme_.direction_input(ray.dir_code, dirs_[r]);
-        dir_batch_[r] = batch_;
-      }
-      dir_of_sample_[i] = &dirs_[r];
-      cfiu_.weighted_sum(f.block, f.coords[i], &features_[i * F]);
-    }
-    tme_.eval_batch(n, features_.data(), dir_of_sample_.data(), outputs_.data());
-    for (size_t i = 0; i < n; ++i) vru_.composite(p.rays[f.rays[i]], outputs_[i].alpha, outputs_[i].rgb);
-    f.stay = has_live_ray_in(math_, model_, p, f.cv_tag);
-  }
-
-  const Tme& tme() const { return tme_; }
-  const Vru& vru() const { return vru_; }
-
- private:
-  const SceneModel& model_;
-  const ChipNumerics n_;
-  const RayMath& math_;
-  const Cfiu& cfiu_;
-  Tme tme_;
-  Vru vru_;
-  std::vector<int32_t> features_;                   // F per sample of the batch
-  std::vector<TmeOutput> outputs_;                  // per sample
-  std::vector<const TmeDirection*> dir_of_sample_;  // per sample: its ray's direction inputs
-  std::vector<TmeDirection> dirs_;                  // per ray of the packet
-  std::vector<uint64_t> dir_batch_;                 // per ray: the batch dirs_ was computed for
-  uint64_t batch_ = 0;
-};
-
-// Runs BatchArithmetic jobs in order on a second thread. Each side spins
-// before it sleeps, and wakes the other only when that one sleeps, so
-// that a job costs no system call while both are busy.
-class Worker {
- public:
-  Worker(BatchArithmetic& arithmetic, RpBuffer& buffer, std::vector<Flight>& flights, size_t capacity)
-      : arithmetic_(arithmetic), buffer_(buffer), flights_(flights), queue_(capacity) {
-    thread_ = std::thread([this] { loop(); });
-  }
-  ~Worker() {
-    stop_.store(true);
-    submitted_.fetch_add(1);
-    submitted_.notify_one();
-    thread_.join();
-  }
-
-  // Queues the job of RP `rp` (at most `capacity` jobs outstanding); returns
-  // its sequence number.
-  uint64_t submit(uint32_t rp) {
-    const uint64_t seq = submitted_.load();
-    queue_[seq % queue_.size()] = rp;
-    submitted_.store(seq + 1);
-    if (worker_sleeping_.load()) submitted_.notify_one();
-    return seq;
-  }
-  // Waits until job `seq` is done (its results are then visible).
-  void wait(uint64_t seq) {
-    if (!spin_until([&] { return completed_.load() > seq; }, kMainSpin)) {
-      main_sleeping_.store(true);
-      for (uint64_t done = completed_.load(); done <= seq; done = completed_.load()) completed_.wait(done);
-      main_sleeping_.store(false);
-    }
-    if (error_) std::rethrow_exception(error_);
-  }
-
- private:
-  // Polls `ready` for up to `budget` before the caller goes to sleep. The
-  // worker waits long (jobs come every few microseconds while a frame runs,
-  // and a wake-up through the kernel costs about as much as a small job); the
-  // main thread waits briefly.
-  template <class Ready>
-  static bool spin_until(Ready ready, std::chrono::microseconds budget) {
-    const auto deadline = std::chrono::steady_clock::now() + budget;
-    for (;;) {
-      for (int i = 0; i < 64; ++i) {
-        if (ready()) return true;
-#if defined(__x86_64__) || defined(__i386__)
-        __builtin_ia32_pause();
-#endif
-      }
-      if (std::chrono::steady_clock::now() >= deadline) return ready();
-    }
-  }
-
-  void loop() {
-    uint64_t next = 0;
-    for (;;) {
-      if (!spin_until([&] { return submitted_.load() != next; }, kWorkerSpin)) {
-        worker_sleeping_.store(true);
-        for (uint64_t avail = submitted_.load(); avail == next; avail = submitted_.load()) submitted_.wait(avail);
-        worker_sleeping_.store(false);
-      }
-      if (stop_.load()) return;
-      const uint64_t avail = submitted_.load();
-      for (; next < avail; ++next) {
-        const uint32_t rp = queue_[next % queue_.size()];
-        try {
-          if (!error_) arithmetic_.run(buffer_[rp], flights_[rp]);
-        } catch (...) {
-          error_ = std::current_exception();
-        }
-        completed_.store(next + 1);
-        if (main_sleeping_.load()) completed_.notify_one();
-      }
-    }
-  }
-
-  BatchArithmetic& arithmetic_;
-  RpBuffer& buffer_;
-  std::vector<Flight>& flights_;
-  std::vector<uint32_t> queue_;
-  std::atomic<uint64_t> submitted_{0}, completed_{0};
-  std::atomic<bool> stop_{false}, worker_sleeping_{false}, main_sleeping_{false};
-  std::exception_ptr error_;
-  std::thread thread_;
-  static constexpr std::chrono::microseconds kMainSpin{100}, kWorkerSpin{2000};
 };
 
 class HitSeries {
@@ -321,7 +146,10 @@ class Engine {
     macs_per_sample_ = macs;
     neurons_per_sample_ = neurons;
     tme_cycles_per_sample_ = std::max<uint64_t>(1, ceil_div(macs, uint64_t(t_.tme_macs_per_cycle)));
-    if (options.threads > 1) worker_ = std::make_unique<Worker>(arithmetic_, buffer_, flights_, rp_capacity_);
+    if (options.threads > 1) {
+      ahead_ = std::make_unique<FrontEndAhead>(zorg_, front_, vru_, kFrontEndAheadPackets);
+      worker_ = std::make_unique<Worker>(arithmetic_, buffer_, flights_, rp_capacity_, ahead_.get());
+    }
   }
 
   void run() {
@@ -397,10 +225,20 @@ class Engine {
     }
     if (!fe_.holding && !zorg_.done()) {
       const PixelQuad quad = zorg_.next();
-      const uint64_t evals = front_.tsps_position_evals();
-      fe_.packet = front_.build(quad, vru_);
-      const uint64_t tsps_cycles =
-          ceil_div(front_.tsps_position_evals() - evals, uint64_t(t_.tsps_position_evals_per_cycle));
+      uint64_t evals = 0;
+      if (worker_) {  // built ahead on the worker thread, in the same order
+        FrontEndPacket e = worker_->take_packet();
+        if (e.quad.sequence != quad.sequence)
+          throw std::logic_error(
+              fmt::format("cycle simulator: front-end packet {} arrived for quad {}", e.quad.sequence, quad.sequence));
+        fe_.packet = std::move(e.packet);
+        evals = e.tsps_position_evals;
+      } else {
+        const uint64_t before = front_.tsps_position_evals();
+        fe_.packet = front_.build(quad, vru_);
+        evals = front_.tsps_position_evals() - before;
+      }
+      const uint64_t tsps_cycles = ceil_div(evals, uint64_t(t_.tsps_position_evals_per_cycle));
       fe_.end = c + std::max<uint64_t>(uint64_t(t_.zorg_cycles_per_rp), tsps_cycles);
       fe_.sequence = quad.sequence;
       fe_.holding = true;
@@ -1174,6 +1012,7 @@ class Engine {
   std::vector<uint32_t> micro_log_;
   std::vector<MemoryCompletion> completions_;
   std::vector<uint64_t> retry_micro_, retry_mlp_;
+  std::unique_ptr<FrontEndAhead> ahead_;  // with threads = 2: the front end runs on the worker
   std::unique_ptr<Worker> worker_;
 
   FrontEndShell fe_;

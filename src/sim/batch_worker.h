@@ -1,0 +1,153 @@
+#pragma once
+// The simulator's work that does not depend on the clock, and the second
+// thread it may run on (--threads 2):
+//   BatchArithmetic  a batch's interpolation sums, MLP and compositing;
+//   FrontEndAhead    the front end's ray packets, built in ZORG order ahead
+//                    of the cycle at which the front end takes them;
+//   Worker           a thread that runs both, batch jobs in submission order.
+// The engine keeps every timing decision: it only reads results computed
+// here, which are the same whichever thread computed them.
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <exception>
+#include <thread>
+#include <vector>
+
+#include "chip/cfiu.h"
+#include "chip/chip.h"
+#include "chip/chip_ray.h"
+#include "chip/front_end.h"
+#include "chip/oo_si.h"
+#include "chip/rp_buffer.h"
+#include "chip/tme.h"
+#include "chip/vru.h"
+#include "chip/zorg.h"
+#include "model/scene_model.h"
+
+namespace edrnr::sim {
+
+// An RP's batch from the FTU until its last sample leaves the VRU. The
+// arithmetic job (weighted sums, MLP, compositing) reads block, cv_tag, coords
+// and rays and writes stay; it may run on the worker thread in between.
+struct Flight {
+  uint32_t slot = 0;   // computation-SRAM slot of the batch (freed when the CFIU has read it)
+  uint32_t block = 0;  // feature block (its line stays reserved until then)
+  uint32_t cv_tag = 0;
+  std::vector<uint8_t> sample_cycles;     // CFIU cycles per sample (1 + bank conflicts)
+  std::vector<chip::SampleCoord> coords;  // SCC output per sample
+  std::vector<uint8_t> rays;              // ray of each sample
+  bool stay = false;                      // a live ray is still in the CV: reschedule; else leave it
+  uint64_t job = 0;                       // job sequence number
+};
+
+// The arithmetic of batches: interpolation sums, the TME and the VRU, with
+// their own unit instances, so that it can run on a thread of its own.
+class BatchArithmetic {
+ public:
+  BatchArithmetic(const SceneModel& model, const ChipConfig& config, const ChipNumerics& n, const chip::RayMath& math,
+                  const chip::Cfiu& cfiu, double delta);
+
+  // The interpolation sums of every sample, the TME on the whole batch (the
+  // direction inputs once per ray), then compositing in sample order; sets
+  // f.stay.
+  void run(chip::RayPacket& p, Flight& f);
+
+  const chip::Tme& tme() const { return tme_; }
+  const chip::Vru& vru() const { return vru_; }
+
+ private:
+  const SceneModel& model_;
+  const ChipNumerics n_;
+  const chip::RayMath& math_;
+  const chip::Cfiu& cfiu_;
+  chip::Tme tme_;
+  chip::Vru vru_;
+  std::vector<int32_t> features_;                         // F per sample of the batch
+  std::vector<chip::TmeOutput> outputs_;                  // per sample
+  std::vector<const chip::TmeDirection*> dir_of_sample_;  // per sample: its ray's direction inputs
+  std::vector<chip::TmeDirection> dirs_;                  // per ray of the packet
+  std::vector<uint64_t> dir_batch_;                       // per ray: the batch dirs_ was computed for
+  uint64_t batch_ = 0;
+};
+
+// One front-end packet: the quad ZORG issued, its packet and the TSPS
+// position evaluations spent on it (its front-end cycles follow from them).
+struct FrontEndPacket {
+  chip::PixelQuad quad;
+  chip::RayPacket packet;
+  uint64_t tsps_position_evals = 0;
+};
+
+// Builds the frame's packets in ZORG order with its own ZORG and the given
+// front end. Single producer (the worker), single consumer (the engine).
+class FrontEndAhead {
+ public:
+  // front_end and vru are used by the producer only until the worker stops.
+  FrontEndAhead(const chip::Zorg& zorg, chip::FrontEnd& front_end, const chip::Vru& vru, size_t depth);
+
+  // Producer: builds the next packet if the ring has room. False when it has
+  // none or the frame is done.
+  bool produce_one();
+  // Producer: whether produce_one() would build a packet, and whether fewer
+  // than a quarter of the ring's packets are ready.
+  bool can_produce() const;
+  bool running_low() const;
+  // Consumer: whether the next packet is ready; take() moves it out.
+  // Precondition of take(): ready().
+  bool ready() const { return produced_.load(std::memory_order_acquire) != consumed_; }
+  FrontEndPacket take();
+
+  std::atomic<uint64_t>& produced() { return produced_; }
+  uint64_t consumed() const { return consumed_; }
+
+ private:
+  chip::Zorg zorg_;
+  chip::FrontEnd& front_;
+  const chip::Vru& vru_;
+  std::vector<FrontEndPacket> ring_;
+  std::atomic<uint64_t> produced_{0};
+  std::atomic<uint64_t> consumed_shared_{0};  // consumed_, as the producer sees it
+  uint64_t consumed_ = 0;                     // consumer's own count
+};
+
+// Runs BatchArithmetic jobs in order on a second thread and, between them,
+// builds front-end packets ahead (when given a FrontEndAhead). Each side
+// spins before it sleeps, and wakes the other only when that one sleeps, so
+// that a job costs no system call while both are busy.
+class Worker {
+ public:
+  Worker(BatchArithmetic& arithmetic, chip::RpBuffer& buffer, std::vector<Flight>& flights, size_t capacity,
+         FrontEndAhead* ahead);
+  ~Worker();
+
+  // Queues the job of RP `rp` (at most `capacity` jobs outstanding); returns
+  // its sequence number.
+  uint64_t submit(uint32_t rp);
+  // Waits until job `seq` is done (its results are then visible). Rethrows
+  // an exception a job threw.
+  void wait(uint64_t seq);
+  // The next front-end packet, waiting for it if need be.
+  FrontEndPacket take_packet();
+
+ private:
+  void loop();
+  void signal();
+  void main_wait(const std::atomic<uint64_t>& counter, uint64_t above);
+  void fail_with(std::exception_ptr e);  // worker: records a job's exception
+  void rethrow_failure() const;          // main: rethrows it, if any
+
+  BatchArithmetic& arithmetic_;
+  chip::RpBuffer& buffer_;
+  std::vector<Flight>& flights_;
+  FrontEndAhead* ahead_;
+  std::vector<uint32_t> queue_;
+  std::atomic<uint64_t> submitted_{0}, completed_{0};
+  std::atomic<uint64_t> signals_{0};  // bumped by the main thread whenever the worker may have work
+  std::atomic<bool> stop_{false}, worker_sleeping_{false}, main_sleeping_{false};
+  std::exception_ptr error_;  // written once by the worker, then failed_ set
+  std::atomic<bool> failed_{false};
+  std::thread thread_;
+};
+
+}  // namespace edrnr::sim
