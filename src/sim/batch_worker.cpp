@@ -127,14 +127,17 @@ Worker::Worker(BatchArithmetic& arithmetic, RpBuffer& buffer, std::vector<Flight
 
 Worker::~Worker() {
   stop_.store(true);
-  signal();
+  signals_.fetch_add(1);
   signals_.notify_one();
   thread_.join();
 }
 
+// The work was published (a seq_cst store) before this reads worker_sleeping_:
+// either the worker sees the work before it sleeps, or this sees it asleep.
 void Worker::signal() {
+  if (!worker_sleeping_.load()) return;
   signals_.fetch_add(1);
-  if (worker_sleeping_.load()) signals_.notify_one();
+  signals_.notify_one();
 }
 
 uint64_t Worker::submit(uint32_t rp) {

@@ -143,7 +143,7 @@ class Worker {
   FrontEndAhead* ahead_;
   std::vector<uint32_t> queue_;
   std::atomic<uint64_t> submitted_{0}, completed_{0};
-  std::atomic<uint64_t> signals_{0};  // bumped by the main thread whenever the worker may have work
+  std::atomic<uint64_t> signals_{0};  // bumped by the main thread to wake the sleeping worker
   std::atomic<bool> stop_{false}, worker_sleeping_{false}, main_sleeping_{false};
   std::exception_ptr error_;  // written once by the worker, then failed_ set
   std::atomic<bool> failed_{false};
