@@ -229,11 +229,14 @@ void Tme::eval_batch(size_t samples, const int32_t* features, const TmeDirection
   if (current_ < 0) throw std::logic_error("TME eval: no MLP loaded");
   if (samples == 0) return;
   const size_t need = samples * size_t(kMaxLayerWidth);
+  if (term_of_sample_.size() < samples) {
+    term_of_sample_.resize(samples);
+    term_index_.resize(samples);
+  }
   if (act_a_.size() < need) {
     act_a_.resize(need);
     act_b_.resize(need);
     sum_main_.resize(need);
-    sum_dir_.resize(need);
     abs_x_.resize(need);
     abs_sum_.resize(need);
   }
@@ -252,13 +255,11 @@ void Tme::eval_batch(size_t samples, const int32_t* features, const TmeDirection
 // direction partial sum and the requantization per neuron as the TME does them.
 template <fx::Rounding M>
 void Tme::layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32_t* y, bool hidden, int out_bits,
-                      int split, const fx::Requant* split_q) {
+                      int split, const TmeDirTerms* const* dir_terms) {
   const int A = n_.accumulator_bits;
   const size_t W = kMaxLayerWidth;
   const int main_in = split >= 0 ? split : L.in;
   tme_dot_columns(L.wt.data(), size_t(L.out_pad), 0, size_t(main_in), x, W, samples, sum_main_.data(), W);
-  if (split >= 0)
-    tme_dot_columns(L.wt.data(), size_t(L.out_pad), size_t(split), size_t(L.in), x, W, samples, sum_dir_.data(), W);
   uint64_t saturations = L.bias_saturations * samples;
   if (hidden && split < 0 && L.requant_vector && L.requant_rounding == M) {
     // Every sum is exact and every requantization fits 64 bits: the same
@@ -294,7 +295,8 @@ void Tme::layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32
   for (size_t s = 0; s < samples; ++s) {
     const int32_t* xs = x + s * W;
     int32_t* main_sum = &sum_main_[s * W];
-    const int32_t* dir_sum = &sum_dir_[s * W];
+    const TmeDirTerms* dir = split >= 0 ? dir_terms[s] : nullptr;
+    if (dir) saturations += dir->saturations;
     const int32_t* abs_sum = &abs_sum_[s * W];
     int32_t* ys = y + s * W;
     for (int j = 0; j < L.out; ++j) {
@@ -311,13 +313,9 @@ void Tme::layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32
           saturations += acc != sum;
         }
       }
-      if (split >= 0) {
-        // The direction products in an accumulator of their own, then to
-        // accumulator units.
-        const int64_t part = dir_sum[j];
-        const int64_t p = fx::saturate(part, A);
-        saturations += p != part;
-        const int64_t sum = acc + fx::requantize<M>(p, *split_q);
+      if (dir) {
+        // The direction term (direction_terms()).
+        const int64_t sum = acc + dir->term[size_t(j)];
         acc = fx::saturate(sum, A);
         saturations += acc != sum;
       }
@@ -344,6 +342,22 @@ void Tme::layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32
   }
   counters_.macs += uint64_t(L.in) * uint64_t(L.out) * samples;
   counters_.saturations += saturations;
+}
+
+template <fx::Rounding M>
+void Tme::direction_terms(const TmeLayer& L, int split, const fx::Requant& q, const TmeDirection& d, TmeDirTerms& t) {
+  const size_t W = kMaxLayerWidth;
+  std::array<int32_t, kMaxLayerWidth> x{}, sum{};
+  std::copy(d.x.begin(), d.x.end(), x.begin() + split);
+  tme_dot_columns(L.wt.data(), size_t(L.out_pad), size_t(split), size_t(L.in), x.data(), W, 1, sum.data(), W);
+  const int A = n_.accumulator_bits;
+  t.saturations = 0;
+  for (int j = 0; j < L.out; ++j) {
+    const int64_t part = sum[size_t(j)];
+    const int64_t p = fx::saturate(part, A);
+    t.saturations += p != part;
+    t.term[size_t(j)] = fx::requantize<M>(p, q);
+  }
 }
 
 template <fx::Rounding M>
@@ -387,14 +401,25 @@ void Tme::eval_batch_as(size_t samples, const int32_t* features, const TmeDirect
     out[s].alpha = alpha_lut_(out[s].raw_density);
     if (!geo_kernel)
       for (int g = 0; g < G; ++g) y[s * W + size_t(g)] = in_stage(x[s * W + size_t(g)], m.geo_in);
-    const TmeDirection& d = *dirs[s];
-    std::copy(d.x.begin(), d.x.end(), y + s * W + size_t(G));
-    saturations += d.saturations;
+    const TmeDirection* d = dirs[s];
+    saturations += d->saturations;
+    if (m.color.empty()) continue;
+    // The ray's direction terms: found among the batch's few rays, or made.
+    size_t k = 0;
+    while (k < term_dirs_.size() && term_dirs_[k] != d) ++k;
+    if (k == term_dirs_.size()) {
+      term_dirs_.push_back(d);
+      if (terms_.size() < term_dirs_.size()) terms_.resize(term_dirs_.size());
+      direction_terms<M>(m.color.front(), G, m.dir_in, *d, terms_[k]);
+    }
+    term_index_[s] = uint32_t(k);
   }
+  for (size_t s = 0; s < samples && !m.color.empty(); ++s) term_of_sample_[s] = &terms_[term_index_[s]];
+  term_dirs_.clear();
   std::swap(x, y);
   for (size_t l = 0; l < m.color.size(); ++l) {
     const bool hidden = l + 1 < m.color.size();
-    layer_batch<M>(m.color[l], samples, x, y, hidden, hidden ? act : outb, l == 0 ? G : -1, &m.dir_in);
+    layer_batch<M>(m.color[l], samples, x, y, hidden, hidden ? act : outb, l == 0 ? G : -1, term_of_sample_.data());
     std::swap(x, y);
   }
   for (size_t s = 0; s < samples; ++s)

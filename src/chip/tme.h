@@ -125,6 +125,15 @@ struct TmeDirection {
   uint64_t saturations = 0;  // codes clipped on the way (counted again per sample)
 };
 
+// What a ray's direction adds to each neuron of the first colour layer: the
+// direction products summed in an accumulator of their own, saturated and
+// brought to accumulator units. The same for every sample of the ray in one
+// MLP, so a batch computes it once per ray.
+struct TmeDirTerms {
+  std::array<int64_t, kMaxLayerWidth> term{};
+  uint64_t saturations = 0;  // partial sums clipped (counted again per sample)
+};
+
 class Tme {
  public:
   // delta: sample spacing in scene units. Throws Error if the model has no
@@ -157,16 +166,24 @@ class Tme {
   template <fx::Rounding M>
   void eval_batch_as(size_t samples, const int32_t* features, const TmeDirection* const* dirs, TmeOutput* out);
   // One layer for every sample (kMaxLayerWidth values per sample in x and y).
-  // split >= 0: inputs from `split` on are direction inputs, summed apart and
-  // brought to accumulator units by split_q.
+  // split >= 0: inputs from `split` on are direction inputs, whose part of
+  // each sample's sums is dir_terms[sample] (x holds only the first `split`).
   template <fx::Rounding M>
   void layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32_t* y, bool hidden, int out_bits,
-                   int split, const fx::Requant* split_q);
+                   int split, const TmeDirTerms* const* dir_terms);
+  // The direction terms of `d` for layer L, whose inputs from `split` on are
+  // the direction inputs, brought to accumulator units by q.
+  template <fx::Rounding M>
+  void direction_terms(const TmeLayer& L, int split, const fx::Requant& q, const TmeDirection& d, TmeDirTerms& t);
 
   const SceneModel& model_;
   ChipNumerics n_;
   // Scratch of eval_batch: activations and sums, kMaxLayerWidth per sample.
-  std::vector<int32_t> act_a_, act_b_, sum_main_, sum_dir_, abs_x_, abs_sum_;
+  std::vector<int32_t> act_a_, act_b_, sum_main_, abs_x_, abs_sum_;
+  std::vector<const TmeDirection*> term_dirs_;  // the batch's distinct directions ...
+  std::vector<TmeDirTerms> terms_;              // ... and their terms
+  std::vector<uint32_t> term_index_;            // per sample: its direction's place in terms_
+  std::vector<const TmeDirTerms*> term_of_sample_;
   TmeDirection eval_dir_;  // eval()'s direction inputs
   std::vector<TmeMlp> mlps_;
   ActivationLut alpha_lut_, sigmoid_lut_;
