@@ -347,13 +347,16 @@ void Tme::layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32
 template <fx::Rounding M>
 void Tme::direction_terms(const TmeLayer& L, int split, const fx::Requant& q, const TmeDirection& d, TmeDirTerms& t) {
   const size_t W = kMaxLayerWidth;
-  std::array<int32_t, kMaxLayerWidth> x{}, sum{};
-  std::copy(d.x.begin(), d.x.end(), x.begin() + split);
-  tme_dot_columns(L.wt.data(), size_t(L.out_pad), size_t(split), size_t(L.in), x.data(), W, 1, sum.data(), W);
+  // The kernel reads x[split, L.in) and writes sum[0, L.out_pad); the bound
+  // scratch is free here (layer_batch() fills it again).
+  int32_t* x = abs_x_.data();
+  int32_t* sum = abs_sum_.data();
+  std::copy(d.x.begin(), d.x.end(), x + split);
+  tme_dot_columns(L.wt.data(), size_t(L.out_pad), size_t(split), size_t(L.in), x, W, 1, sum, W);
   const int A = n_.accumulator_bits;
   t.saturations = 0;
   for (int j = 0; j < L.out; ++j) {
-    const int64_t part = sum[size_t(j)];
+    const int64_t part = sum[j];
     const int64_t p = fx::saturate(part, A);
     t.saturations += p != part;
     t.term[size_t(j)] = fx::requantize<M>(p, q);

@@ -37,11 +37,14 @@ class ActivityRecorder {
   void set(uint32_t unit, UnitState state, uint64_t cycle) {
     Track& t = tracks_[unit];
     ++t.cycles[size_t(state)];
-    if (t.open && state == t.state && cycle == t.last + 1) {
-      t.last = cycle;
-      return;
+    if (t.open) {
+      if (state == t.state && cycle == t.last + 1) {
+        t.last = cycle;
+        return;
+      }
+      close(unit);
     }
-    close(unit);
+    if (cycle >= window_end_) return;  // an interval opened now ends outside the window
     t.open = true;
     t.state = state;
     t.start = cycle;

@@ -61,7 +61,9 @@ class Fifo {
   // Appends `item`, pushed in `cycle`. Precondition: can_push(); throws Error otherwise.
   void push(T item, uint64_t cycle) {
     if (full()) fail("fifo '{}': push while full (capacity {}); check can_push() first", name_, capacity());
-    Slot& s = slots_[(head_ + count_) % slots_.size()];
+    size_t tail = head_ + count_;
+    if (tail >= slots_.size()) tail -= slots_.size();
+    Slot& s = slots_[tail];
     s.item = std::move(item);
     s.visible_cycle = cycle + latency_cycles_;
     ++count_;
@@ -97,7 +99,7 @@ class Fifo {
     if (!can_pop(cycle)) fail("fifo '{}': pop in cycle {} with no visible item", name_, cycle);
     T out = std::move(slots_[head_].item);
     slots_[head_].item = T{};
-    head_ = (head_ + 1) % slots_.size();
+    if (++head_ == slots_.size()) head_ = 0;
     --count_;
     ++stats_.pops;
     return out;
