@@ -110,6 +110,17 @@ class RpRob {
   const std::deque<uint32_t>& recent_tags() const { return recent_; }
   const RpRobCounters& counters() const { return counters_; }
 
+  // For a simulator that skips cycles in which nothing changes:
+  // whether schedule() would return nothing without looking (it did so and
+  // nothing changed since) ...
+  bool schedule_known_empty() const { return nothing_version_ == version_; }
+  // ... whether insert(rp, tag) would be refused without looking ...
+  bool insert_known_refused(uint32_t rp, uint32_t tag) const {
+    return refused_version_ == version_ && refused_rp_ == rp && refused_tag_ == tag;
+  }
+  // ... and the refused insert asked again `times` times in such cycles.
+  void repeat_refused_insert(uint64_t times) { counters_.insert_refusals += times; }
+
  private:
   struct Ready {
     uint32_t rp;

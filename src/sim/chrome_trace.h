@@ -50,6 +50,23 @@ class ActivityRecorder {
     t.start = cycle;
     t.last = cycle;
   }
+  // set(unit, state, c) for each of the `cycles` cycles c from `first`.
+  void repeat(uint32_t unit, UnitState state, uint64_t first, uint64_t cycles) {
+    Track& t = tracks_[unit];
+    t.cycles[size_t(state)] += cycles;
+    if (t.open) {
+      if (state == t.state && first == t.last + 1) {
+        t.last = first + cycles - 1;
+        return;
+      }
+      close(unit);
+    }
+    if (first >= window_end_) return;
+    t.open = true;
+    t.state = state;
+    t.start = first;
+    t.last = first + cycles - 1;
+  }
   // Ends every open interval (call once, after the last cycle).
   void finish();
 

@@ -105,6 +105,18 @@ class Fifo {
     return out;
   }
 
+  // The cycle the oldest item becomes visible; UINT64_MAX when empty.
+  uint64_t head_visible_cycle() const { return count_ > 0 ? slots_[head_].visible_cycle : UINT64_MAX; }
+
+  // sample() for `cycles` consecutive cycles from `first` in which nothing is
+  // pushed or popped and the head's visibility does not change.
+  void sample_repeat(uint64_t first, uint64_t cycles) {
+    stats_.sampled_cycles += cycles;
+    if (full()) stats_.full_cycles += cycles;
+    if (!can_pop(first)) stats_.empty_cycles += cycles;
+    stats_.occupancy_sum += count_ * cycles;
+  }
+
   // Per-cycle statistics; call once per simulated cycle.
   void sample(uint64_t cycle) {
     ++stats_.sampled_cycles;

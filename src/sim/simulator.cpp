@@ -186,6 +186,20 @@ class Engine {
         opt_.progress({cycle_ + 1, rps_done_, zorg_.packet_count()});
         next_progress += opt_.progress_interval_cycles;
       }
+      // Cycles in which nothing can change are counted, not run. The deadlock
+      // and progress checks still fall on the cycles they would.
+      uint64_t until = quiet_until(cycle_);
+      if (until > cycle_ + 1) {
+        bool busy = false;
+        for (UnitState q : quiet_state_) busy |= q == UnitState::Busy;
+        if (!busy) until = std::min(until, cycle_ + 1 + (opt_.deadlock_cycles - quiet));
+        if (opt_.progress) until = std::min(until, std::max(next_progress - 1, cycle_ + 1));
+        if (until > cycle_ + 1) {
+          skip(cycle_ + 1, until - cycle_ - 1);
+          quiet = busy ? 0 : quiet + (until - cycle_ - 1);
+          cycle_ = until - 1;
+        }
+      }
     }
     cycles_ = cycle_ + 1;
     if (opt_.progress) opt_.progress({cycles_, rps_done_, zorg_.packet_count()});
@@ -195,6 +209,94 @@ class Engine {
   }
 
  private:
+  // ------------------------------------------------------------ skipping
+
+  // After cycle c has run: the first later cycle in which any unit, FIFO or
+  // the memory system may act differently from c (a countdown ending, an
+  // item becoming visible). In the cycles between, every unit reports c's
+  // state, and the only side effects are the per-cycle counts that skip()
+  // adds in bulk. c + 1 when that cannot be shown.
+  uint64_t quiet_until(uint64_t c) {
+    const uint64_t next = c + 1;
+    if (!mem_.idle() || !retry_micro_.empty() || !retry_mlp_.empty()) return next;
+    if (prefetch_next_ < prefetch_lines_.size() || !bitmaps_ready_) return next;
+    uint64_t u = UINT64_MAX;
+    auto until = [&](uint64_t t) { u = std::min(u, std::max(t, next)); };
+    UnitState* st = quiet_state_;
+    // Front end: a packet counting down, or a hand-over waiting for room
+    // that only another unit's action makes, or the frame done.
+    if (fe_.holding) {
+      if (c < fe_.end) until(fe_.end);
+      st[kFrontEnd] = next < fe_.end ? UnitState::Busy : UnitState::StallOutput;
+    } else if (!zorg_.done()) {
+      return next;
+    } else {
+      st[kFrontEnd] = UnitState::Idle;
+    }
+    // CTU: counting down, an insert the RP-ROB keeps refusing, or waiting
+    // for its FIFOs' next item.
+    if (ctu_s_.holding) {
+      if (c < ctu_s_.end)
+        until(ctu_s_.end);
+      else if (!ctu_s_.result.found || !rob_.insert_known_refused(ctu_s_.rp, ctu_s_.result.cv_tag))
+        return next;
+      st[kCtu] = next < ctu_s_.end ? UnitState::Busy : UnitState::StallOutput;
+    } else if (retire_q_.can_pop(c) || fe_out_.can_pop(c)) {
+      return next;
+    } else {
+      st[kCtu] = UnitState::Idle;
+    }
+    until(retire_q_.head_visible_cycle());
+    until(fe_out_.head_visible_cycle());
+    // FTU: its result waiting for a full OoO-SI; or all its micro-grid words
+    // read and its run counting down; or free with nothing to schedule.
+    const FtuShell& f = ftu_s_;
+    if (f.holding) {
+      if (f.output) {
+        if (!f.has_batch || !ooo_.full()) return next;
+        st[kFtu] = UnitState::StallOutput;
+      } else {
+        if (f.next_read < f.reads.size() || !f.waiting.empty()) return next;
+        until(std::max(f.ready, f.end - 1));  // the cycle it decides to hand over
+        if (c < f.end) until(f.end);          // busy until then, waiting after
+        st[kFtu] = next < f.end ? UnitState::Busy : UnitState::StallMemory;
+      }
+    } else if (free_slots_.empty()) {
+      st[kFtu] = rob_.empty() ? UnitState::Idle : UnitState::StallOutput;
+    } else if (!rob_.schedule_known_empty()) {
+      return next;
+    } else {
+      st[kFtu] = UnitState::Idle;
+    }
+    // OoO-SI, CFIU, TME and VRU: quiet only when empty.
+    if (!ooo_.empty()) return next;
+    if (cfiu_s_.active) {
+      if (c >= cfiu_s_.start) return next;
+      until(cfiu_s_.start);
+    }
+    if (tme_s_.holding || tme_s_.loading || !tme_in_.empty()) return next;
+    if (vru_s_.holding || !vru_in_.empty()) return next;
+    until(done_q_.head_visible_cycle());
+    st[kOooSi] = st[kCfiu] = st[kTme] = st[kVru] = UnitState::Idle;
+    return u;
+  }
+
+  // Counts cycles [first, first + n) as quiet_until() found them: each unit
+  // in its state, the FIFOs sampled, the memory clocks run, refused RP-ROB
+  // inserts repeated.
+  void skip(uint64_t first, uint64_t n) {
+    for (uint32_t u = 0; u < kUnits; ++u) activity_.repeat(u, quiet_state_[u], first, n);
+    fe_out_.sample_repeat(first, n);
+    retire_q_.sample_repeat(first, n);
+    tme_in_.sample_repeat(first, n);
+    vru_in_.sample_repeat(first, n);
+    if (ctu_s_.holding && first > ctu_s_.end) rob_.repeat_refused_insert(n);
+    completions_.clear();
+    mem_.advance(first + n - 1, completions_);  // idle: the DRAM clocks in bulk
+    if (!completions_.empty()) throw std::logic_error("cycle simulator: a memory completion in skipped cycles");
+    skipped_cycles_ += n;
+  }
+
   // ------------------------------------------------------------ units
 
   void set_state(Unit u, UnitState s) {
@@ -857,6 +959,8 @@ class Engine {
     cnt("sim.tme_cycles_per_sample", "cycles", "TME cycles per sample (MACs per sample / MACs per cycle)",
         tme_cycles_per_sample_);
     cnt("sim.macs_per_sample", "MACs", "multiply-accumulates per sample of one MLP", macs_per_sample_);
+    cnt("host.skipped_cycles", "cycles", "cycles counted in bulk, not stepped: no unit could act in them",
+        skipped_cycles_);
     for (uint32_t u = 0; u < kUnits; ++u)
       for (int st = 0; st < kUnitStates; ++st) {
         const std::string name =
@@ -1022,7 +1126,8 @@ class Engine {
   TmeShell tme_s_;
   VruShell vru_s_;
 
-  uint64_t cycle_ = 0, cycles_ = 0;
+  uint64_t cycle_ = 0, cycles_ = 0, skipped_cycles_ = 0;
+  UnitState quiet_state_[kUnits] = {};  // each unit's state in the cycles quiet_until() found
   bool bitmaps_ready_ = false;
   bool any_busy_ = false;
   uint64_t mlp_lines_ = 0, macs_per_sample_ = 0, neurons_per_sample_ = 0, tme_cycles_per_sample_ = 1;
