@@ -245,6 +245,37 @@ void DramSystem::advance_idle(uint64_t target) {
   }
 }
 
+uint64_t DramSystem::next_event_cycle() const {
+  uint64_t next = UINT64_MAX;
+  for (const Channel& ch : channels_) next = std::min(next, ch.wake);
+  // A tick at cycle t completes the bursts done by t + 1.
+  if (!pending_.empty()) next = std::min(next, pending_.top().done_cycle - 1);
+  return std::max(next, cycle_);
+}
+
+void DramSystem::advance_quiet(uint64_t target) {
+  while (cycle_ < target) {
+    const uint64_t next = std::min(target, next_event_cycle());
+    if (next <= cycle_) {
+      tick();
+      continue;
+    }
+    // Cycles [cycle_, next): no command issues and nothing completes, so the
+    // banks stay as they are: each tick would count one background cycle per
+    // rank and advance the clock.
+    const uint64_t k = next - cycle_;
+    for (const Channel& ch : channels_)
+      for (const Rank& rank : ch.ranks) {
+        const uint64_t active =
+            rank.open_banks > 0 ? k : (rank.refresh_end > cycle_ ? std::min(k, rank.refresh_end - cycle_) : 0);
+        active_rank_cycles_ += active;
+        precharged_rank_cycles_ += k - active;
+      }
+    cycle_ += k;
+    cycles_ += k;
+  }
+}
+
 std::optional<DramCompletion> DramSystem::pop_completion() {
   if (completions_.empty()) return std::nullopt;
   DramCompletion c = completions_.front();

@@ -95,6 +95,13 @@ class DramSystem {
   // cycles, statistics), but jumping over the stretches in which nothing can
   // happen. Returns at once if a request is in flight.
   void advance_idle(uint64_t target);
+  // Advances to cycle `target` with the same result as ticking there one
+  // clock at a time, ticking only in the cycles in which a command may issue
+  // or a request may complete and counting the cycles between in bulk.
+  void advance_quiet(uint64_t target);
+  // The first cycle >= cycle() whose tick may issue a command or complete a
+  // request (UINT64_MAX when none can until a request arrives).
+  uint64_t next_event_cycle() const;
 
   // Completed requests in completion order (ties: the order their last bursts
   // were issued).

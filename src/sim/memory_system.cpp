@@ -149,7 +149,12 @@ void MemorySystem::advance(uint64_t cycle, std::vector<MemoryCompletion>& done) 
       }
       waiting_.pop_front();
     }
-    dram_.tick();
+    // With nothing left to hand over, the DRAM runs to the target in one go
+    // (it ticks where something can happen); else one clock, then retry.
+    if (waiting_.empty())
+      dram_.advance_quiet(target);
+    else
+      dram_.tick();
     while (auto c = dram_.pop_completion()) {
       Transfer& t = transfers_[size_t(c->id)];
       if (--t.requests_left > 0) continue;
@@ -161,6 +166,18 @@ void MemorySystem::advance(uint64_t cycle, std::vector<MemoryCompletion>& done) 
     }
   }
   if (refused) ++dram_rejections_;
+}
+
+uint64_t MemorySystem::quiet_until(uint64_t cycle) const {
+  if (!waiting_.empty()) return cycle + 1;
+  if (idle()) return UINT64_MAX;  // nothing can complete (refreshes run in bulk)
+  const uint64_t e = dram_.next_event_cycle();
+  if (e == UINT64_MAX) return UINT64_MAX;
+  // advance(c) runs the DRAM up to floor((c + 1) dram_hz / core_hz); it ticks
+  // DRAM cycle e from the first c with (c + 1) dram_hz >= (e + 1) core_hz.
+  const unsigned __int128 need = (unsigned __int128)(e + 1) * core_hz_;
+  const uint64_t c = uint64_t((need + dram_hz_ - 1) / dram_hz_) - 1;
+  return std::max(c, cycle + 1);
 }
 
 uint64_t MemorySystem::unique_read_bytes(DataType t) const {

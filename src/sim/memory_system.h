@@ -95,6 +95,12 @@ class MemorySystem {
   // the requests as a trace (sim/dram_trace.h) with it.
   void set_request_observer(DramRequestObserver observer) { request_observer_ = std::move(observer); }
 
+  // After advance(cycle): the first later core cycle whose advance() may
+  // complete a transfer or change the DRAM other than by counting clocks
+  // (UINT64_MAX: none until a request comes). The calls for the cycles
+  // between may be replaced by one advance() for the last of them.
+  uint64_t quiet_until(uint64_t cycle) const;
+
   // No transfer waiting or in flight.
   bool idle() const { return transfers_in_flight_ == 0; }
   uint64_t transfers_in_flight() const { return transfers_in_flight_; }

@@ -188,10 +188,11 @@ class Engine {
       }
       // Cycles in which nothing can change are counted, not run. The deadlock
       // and progress checks still fall on the cycles they would.
-      uint64_t until = quiet_until(cycle_);
+      uint64_t until = opt_.skip_quiet_cycles ? quiet_until(cycle_) : cycle_ + 1;
       if (until > cycle_ + 1) {
         bool busy = false;
         for (UnitState q : quiet_state_) busy |= q == UnitState::Busy;
+        busy |= !mem_.idle();
         if (!busy) until = std::min(until, cycle_ + 1 + (opt_.deadlock_cycles - quiet));
         if (opt_.progress) until = std::min(until, std::max(next_progress - 1, cycle_ + 1));
         if (until > cycle_ + 1) {
@@ -218,10 +219,11 @@ class Engine {
   // adds in bulk. c + 1 when that cannot be shown.
   uint64_t quiet_until(uint64_t c) {
     const uint64_t next = c + 1;
-    if (!mem_.idle() || !retry_micro_.empty() || !retry_mlp_.empty()) return next;
+    if (!retry_micro_.empty() || !retry_mlp_.empty()) return next;
     if (prefetch_next_ < prefetch_lines_.size() || !bitmaps_ready_) return next;
     uint64_t u = UINT64_MAX;
     auto until = [&](uint64_t t) { u = std::min(u, std::max(t, next)); };
+    until(mem_.quiet_until(c));  // no transfer completes before
     UnitState* st = quiet_state_;
     // Front end: a packet counting down, or a hand-over waiting for room
     // that only another unit's action makes, or the frame done.
@@ -292,7 +294,7 @@ class Engine {
     vru_in_.sample_repeat(first, n);
     if (ctu_s_.holding && first > ctu_s_.end) rob_.repeat_refused_insert(n);
     completions_.clear();
-    mem_.advance(first + n - 1, completions_);  // idle: the DRAM clocks in bulk
+    mem_.advance(first + n - 1, completions_);  // the DRAM clocks, ticking only where it must
     if (!completions_.empty()) throw std::logic_error("cycle simulator: a memory completion in skipped cycles");
     skipped_cycles_ += n;
   }

@@ -63,6 +63,9 @@ struct SimOptions {
   // An internal fault is reported after this many cycles in which no unit
   // worked and no memory transfer was in flight.
   uint64_t deadlock_cycles = 100000;
+  // Cycles in which no unit can act are counted in bulk (host.skipped_cycles),
+  // not stepped; off: every cycle is stepped (the same results, slower).
+  bool skip_quiet_cycles = true;
   // When set, sees every DRAM request of the frame (MemorySystem::set_request_observer).
   DramRequestObserver dram_request_observer;
 };

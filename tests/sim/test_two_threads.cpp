@@ -1,7 +1,8 @@
-// The simulator's second thread: front-end packets built ahead of the timing
-// model and fine traversals done ahead on the worker give the same packets,
-// statistics, hit-rate series and image as one thread, with buffers and queues
-// of every size.
+// The simulator's shortcuts give the results of the plain cycle-by-cycle run,
+// with buffers and queues of every size: the second thread (batch arithmetic
+// and front-end packets built ahead on the worker) and the skipping of cycles
+// in which no unit can act give the same packets, statistics, hit-rate
+// series, unit trace and image as one thread stepping every cycle.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -60,7 +61,7 @@ void expect_same_rays(const chip::RayPacket& a, const chip::RayPacket& b) {
   }
 }
 
-TEST(TwoThreads, EveryStatisticAndTheImageMatchOneThread) {
+TEST(Shortcuts, EveryStatisticTraceAndImageMatchSteppingEveryCycle) {
   const SceneModel& m = scene();
   std::vector<std::pair<const char*, SimConfig>> variants;
   auto add = [&](const char* name, auto edit) {
@@ -83,20 +84,33 @@ TEST(TwoThreads, EveryStatisticAndTheImageMatchOneThread) {
     c.chip.switches.ooo_issue = false;
   });
   add("large RP buffer", [](SimConfig& c) { c.chip.rp_buffer_capacity = 256; });
+  double skipped = 0;
   for (const auto& [name, cfg] : variants) {
     SCOPED_TRACE(name);
     for (double azimuth : {30.0, 250.0}) {
       const Camera cam = orbit_camera(48, 40, azimuth, 25.0, 4.0, 50.0);
-      SimOptions one, two;
+      SimOptions stepped, one, two;
+      stepped.skip_quiet_cycles = false;
       two.threads = 2;
-      const SimResult a = simulate_chip(m, cam, cfg, one);
-      const SimResult b = simulate_chip(m, cam, cfg, two);
-      ASSERT_GT(a.summary.samples, 0u);
-      EXPECT_EQ(chip_stats(a), chip_stats(b)) << "azimuth " << azimuth;
-      EXPECT_EQ(a.hit_rate_series, b.hit_rate_series);
-      EXPECT_EQ(a.image.data, b.image.data);
+      for (SimOptions* o : {&stepped, &one, &two}) {
+        o->trace_start_cycle = 300;  // a window that starts and ends mid-frame
+        o->trace_cycles = 2000;
+      }
+      const SimResult r = simulate_chip(m, cam, cfg, stepped);
+      ASSERT_GT(r.summary.samples, 0u);
+      EXPECT_EQ(r.stats->get("host.skipped_cycles"), 0.0);
+      for (const SimOptions* o : {&one, &two}) {
+        SCOPED_TRACE(o->threads);
+        const SimResult a = simulate_chip(m, cam, cfg, *o);
+        EXPECT_EQ(chip_stats(r), chip_stats(a)) << "azimuth " << azimuth;
+        EXPECT_EQ(r.hit_rate_series, a.hit_rate_series);
+        EXPECT_EQ(r.trace, a.trace);
+        EXPECT_EQ(r.image.data, a.image.data);
+        skipped += a.stats->get("host.skipped_cycles");
+      }
     }
   }
+  EXPECT_GT(skipped, 0.0);  // the shortcut was taken
 }
 
 }  // namespace
