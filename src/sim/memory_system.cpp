@@ -175,8 +175,13 @@ uint64_t MemorySystem::quiet_until(uint64_t cycle) const {
   if (e == UINT64_MAX) return UINT64_MAX;
   // advance(c) runs the DRAM up to floor((c + 1) dram_hz / core_hz); it ticks
   // DRAM cycle e from the first c with (c + 1) dram_hz >= (e + 1) core_hz.
-  const unsigned __int128 need = (unsigned __int128)(e + 1) * core_hz_;
-  const uint64_t c = uint64_t((need + dram_hz_ - 1) / dram_hz_) - 1;
+  uint64_t c = 0;
+  if (e < UINT64_MAX / core_hz_ - 1) {
+    c = ((e + 1) * core_hz_ + dram_hz_ - 1) / dram_hz_ - 1;
+  } else {
+    const unsigned __int128 need = (unsigned __int128)(e + 1) * core_hz_;
+    c = uint64_t((need + dram_hz_ - 1) / dram_hz_) - 1;
+  }
   return std::max(c, cycle + 1);
 }
 

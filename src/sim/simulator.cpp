@@ -218,13 +218,19 @@ class Engine {
   // state, and the only side effects are the per-cycle counts that skip()
   // adds in bulk. c + 1 when that cannot be shown.
   uint64_t quiet_until(uint64_t c) {
+    // The most frequent reasons to step the next cycle are tested first.
     const uint64_t next = c + 1;
+    // OoO-SI, CFIU, TME and VRU: quiet only when empty.
+    if (!ooo_.empty() || tme_s_.holding || vru_s_.holding || !tme_in_.empty() || !vru_in_.empty()) return next;
+    if (tme_s_.loading || (cfiu_s_.active && c >= cfiu_s_.start)) return next;
     if (!retry_micro_.empty() || !retry_mlp_.empty()) return next;
     if (prefetch_next_ < prefetch_lines_.size() || !bitmaps_ready_) return next;
     uint64_t u = UINT64_MAX;
     auto until = [&](uint64_t t) { u = std::min(u, std::max(t, next)); };
-    until(mem_.quiet_until(c));  // no transfer completes before
+    if (cfiu_s_.active) until(cfiu_s_.start);
+    until(done_q_.head_visible_cycle());
     UnitState* st = quiet_state_;
+    st[kOooSi] = st[kCfiu] = st[kTme] = st[kVru] = UnitState::Idle;
     // Front end: a packet counting down, or a hand-over waiting for room
     // that only another unit's action makes, or the frame done.
     if (fe_.holding) {
@@ -270,16 +276,7 @@ class Engine {
     } else {
       st[kFtu] = UnitState::Idle;
     }
-    // OoO-SI, CFIU, TME and VRU: quiet only when empty.
-    if (!ooo_.empty()) return next;
-    if (cfiu_s_.active) {
-      if (c >= cfiu_s_.start) return next;
-      until(cfiu_s_.start);
-    }
-    if (tme_s_.holding || tme_s_.loading || !tme_in_.empty()) return next;
-    if (vru_s_.holding || !vru_in_.empty()) return next;
-    until(done_q_.head_visible_cycle());
-    st[kOooSi] = st[kCfiu] = st[kTme] = st[kVru] = UnitState::Idle;
+    until(mem_.quiet_until(c));  // no transfer completes before
     return u;
   }
 
