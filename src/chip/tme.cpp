@@ -292,7 +292,18 @@ void Tme::layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32
   // The requantization in the kernels once the accumulators are formed (they
   // go into sum_main_, in place).
   const bool kernel = L.requant_kernel && L.requant_rounding == M;
-  for (size_t s = 0; s < samples; ++s) {
+  // Exact sums plus direction terms, requantized in the kernels: the loop
+  // below's sums and saturations, several neurons at a time.
+  const bool add_terms = split >= 0 && kernel && !bound && A <= 32;
+  if (add_terms) {
+    if (term_rows_.size() < samples) term_rows_.resize(samples);
+    for (size_t s = 0; s < samples; ++s) {
+      saturations += dir_terms[s]->saturations;
+      term_rows_[s] = dir_terms[s]->term.data();
+    }
+    saturations += tme_add_terms(sum_main_.data(), W, samples, size_t(L.out), L.bias_sat.data(), term_rows_.data(), A);
+  }
+  for (size_t s = 0; s < samples && !add_terms; ++s) {
     const int32_t* xs = x + s * W;
     int32_t* main_sum = &sum_main_[s * W];
     const TmeDirTerms* dir = split >= 0 ? dir_terms[s] : nullptr;

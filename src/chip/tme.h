@@ -184,7 +184,8 @@ class Tme {
   std::vector<TmeDirTerms> terms_;              // ... and their terms
   std::vector<uint32_t> term_index_;            // per sample: its direction's place in terms_
   std::vector<const TmeDirTerms*> term_of_sample_;
-  TmeDirection eval_dir_;  // eval()'s direction inputs
+  std::vector<const int64_t*> term_rows_;  // per sample: term_of_sample_[s]->term.data()
+  TmeDirection eval_dir_;                  // eval()'s direction inputs
   std::vector<TmeMlp> mlps_;
   ActivationLut alpha_lut_, sigmoid_lut_;
   fx::Requant dir_code_;  // direction code -> INT8 direction input (step 1 / (2^(activation_bits-1) - 1))

@@ -128,6 +128,44 @@ uint64_t RequantSigned(const int32_t* HWY_RESTRICT x, size_t x_stride, size_t sa
   return saturations;
 }
 
+// tme_add_terms (tme_kernel.h).
+uint64_t AddTerms(int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t samples, size_t count,
+                  const int64_t* HWY_RESTRICT base, const int64_t* const* HWY_RESTRICT terms, int acc_bits) {
+  const int64_t hi = (int64_t(1) << (acc_bits - 1)) - 1, lo = -hi - 1;
+  uint64_t saturations = 0;
+  size_t vector_end = 0;
+#if HWY_TARGET != HWY_SCALAR
+  const hn::ScalableTag<int64_t> d64;
+  const hn::Rebind<int32_t, decltype(d64)> d32h;
+  const size_t n = hn::Lanes(d64);
+  vector_end = count / n * n;
+  const auto hi_v = hn::Set(d64, hi), lo_v = hn::Set(d64, lo);
+  HWY_ALIGN int64_t lanes[HWY_MAX_BYTES / sizeof(int64_t)];
+  for (size_t s = 0; s < samples; ++s) {
+    int32_t* ss = sum + s * sum_stride;
+    const int64_t* ts = terms[s];
+    for (size_t j = 0; j < vector_end; j += n) {
+      const auto v = hn::Add(hn::Add(hn::LoadU(d64, base + j), hn::PromoteTo(d64, hn::LoadU(d32h, ss + j))),
+                             hn::LoadU(d64, ts + j));
+      const auto c = hn::Min(hn::Max(v, lo_v), hi_v);
+      saturations += n - hn::CountTrue(d64, hn::Eq(v, c));
+      hn::Store(c, d64, lanes);
+      for (size_t l = 0; l < n; ++l) ss[j + l] = int32_t(lanes[l]);
+    }
+  }
+#endif
+  if (vector_end < count) {
+    for (size_t s = 0; s < samples; ++s)
+      for (size_t j = vector_end; j < count; ++j) {
+        const int64_t v = base[j] + sum[s * sum_stride + j] + terms[s][j];
+        const int64_t c = v < lo ? lo : (v > hi ? hi : v);
+        saturations += c != v;
+        sum[s * sum_stride + j] = int32_t(c);
+      }
+  }
+  return saturations;
+}
+
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
 
 }  // namespace HWY_NAMESPACE
@@ -140,6 +178,7 @@ namespace edrnr::chip {
 HWY_EXPORT(DotColumns);
 HWY_EXPORT(RequantRelu);
 HWY_EXPORT(RequantSigned);
+HWY_EXPORT(AddTerms);
 HWY_EXPORT(TargetName);
 
 void tme_dot_columns(const int32_t* wt, size_t out_pad, size_t i_begin, size_t i_end, const int32_t* x, size_t x_stride,
@@ -159,6 +198,11 @@ uint64_t tme_requant_signed(const int32_t* x, size_t x_stride, size_t samples, s
                             size_t y_stride) {
   return HWY_DYNAMIC_DISPATCH(RequantSigned)(x, x_stride, samples, count, bias, mult, half, shift, out_bits, y,
                                              y_stride);
+}
+
+uint64_t tme_add_terms(int32_t* sum, size_t sum_stride, size_t samples, size_t count, const int64_t* base,
+                       const int64_t* const* terms, int acc_bits) {
+  return HWY_DYNAMIC_DISPATCH(AddTerms)(sum, sum_stride, samples, count, base, terms, acc_bits);
 }
 
 const char* tme_kernel_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }

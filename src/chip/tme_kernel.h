@@ -45,6 +45,15 @@ uint64_t tme_requant_signed(const int32_t* x, size_t x_stride, size_t samples, s
                             const uint32_t* mult, const uint64_t* half, const uint64_t* shift, int out_bits, int32_t* y,
                             size_t y_stride);
 
+// A layer's sums completed by per-sample terms: for each of `samples` rows
+// and each j < count,
+//   v = base[j] + sum[s * sum_stride + j] + terms[s][j]   (int64; the
+//       caller's contract: no overflow)
+//   sum[s * sum_stride + j] = clamp(v, -2^(acc_bits - 1), 2^(acc_bits - 1) - 1)
+// Returns how many values were clamped. acc_bits in [2, 32].
+uint64_t tme_add_terms(int32_t* sum, size_t sum_stride, size_t samples, size_t count, const int64_t* base,
+                       const int64_t* const* terms, int acc_bits);
+
 // The SIMD target the dispatch picked (for benchmarks and reports).
 const char* tme_kernel_target();
 
