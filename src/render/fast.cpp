@@ -101,6 +101,7 @@ struct TileWork {
   float T[kTileRays], rgb[kTileRays][3];
   bool open[kTileRays];       // may still have samples and T above the threshold
   bool exhausted[kTileRays];  // its march has ended
+  bool hit_aabb[kTileRays];   // meets the object AABB
   int active[kTileRays];      // the open rays
   uint32_t begin[kTileRays], end[kTileRays];
   std::vector<FastSample> samples;  // the round's samples: [0, n_samples) (the vector only grows)
@@ -146,25 +147,20 @@ class TileRenderer {
       if (profile_) tot.profile.traversal_s += since(t);
       return;
     }
-    w.marchers.clear();
-    w.marchers.reserve(kTileRays);
+    // The rays' marchers and directions, set up in SIMD lanes. A ray that
+    // meets the AABB has candidates in the region around it.
+    w.marchers.resize(kTileRays);
+    fast_setup_rays(m_, skip_, camera_, delta_, aabb_, tile.x0, tile.y0, tw, n, w.marchers.data(), w.dx, w.dy, w.dz,
+                    w.hit_aabb);
     int n_active = 0;  // w.active[0, n_active): the open rays, in increasing order
     for (int r = 0; r < kTileRays; ++r) {
       if (r >= n) {  // padding lanes of the direction encoding
         w.dx[r] = w.dy[r] = w.dz[r] = 0.f;
         continue;
       }
-      const Ray ray = camera_.pixel_ray(tile.x0 + r % tw, tile.y0 + r / tw);
       ++tot.stats.rays;
-      const Vec3f d = ray.dir.cast<float>();
-      w.dx[r] = d.x;
-      w.dy[r] = d.y;
-      w.dz[r] = d.z;
-      const FastMarcher& fm = w.marchers.emplace_back(m_, skip_, ray, make_micro_ray(m_, ray, delta_));
-      // A ray that meets the AABB has candidates in the region around it.
-      double t_near, t_far;
-      if (!fm.empty() && intersect_box(ray.origin, ray.dir, aabb_, t_near, t_far) && t_far >= 0)
-        ++tot.stats.rays_hit_aabb;
+      tot.stats.rays_hit_aabb += w.hit_aabb[r];
+      const FastMarcher& fm = w.marchers[size_t(r)];
       w.T[r] = 1.f;
       w.rgb[r][0] = w.rgb[r][1] = w.rgb[r][2] = 0.f;
       w.open[r] = !fm.empty();  // a ray without candidates keeps the background
@@ -178,6 +174,11 @@ class TileRenderer {
       // Traversal: each open ray's next samples, contiguous per ray.
       if (n_active == 0) break;
       w.n_samples = 0;
+      if (w.count.size() != m_.mlp_count()) {
+        w.count.assign(m_.mlp_count(), 0);
+        w.first.assign(m_.mlp_count(), 0);
+      }
+      w.used.clear();
       if (w.samples.size() < size_t(n_active) * size_t(per_ray)) w.samples.resize(size_t(n_active) * size_t(per_ray));
       // Rays already dimmed below kDimTransmittance ask for fewer samples.
       int group[2][kFastMarchGroup], g[2] = {0, 0};
@@ -280,6 +281,7 @@ class TileRenderer {
         FastSample& f = w.samples[w.n_samples++];
         f.ray = uint32_t(r);
         f.mlp = uint32_t(mlp);
+        if (w.count[size_t(mlp)]++ == 0) w.used.push_back(uint32_t(mlp));
         const int lx = v.x & (kMicroPerFine - 1), ly = v.y & (kMicroPerFine - 1), lz = v.z & (kMicroPerFine - 1);
         f.vertex =
             uint32_t(size_t(block) * kBlockVerts + size_t(lx + kBlockVertsPerAxis * (ly + kBlockVertsPerAxis * lz)));
@@ -291,18 +293,12 @@ class TileRenderer {
     }
   }
 
-  // Counting sort of the round's samples by MLP: w.order holds the samples of
-  // MLP u at [first[u], first[u] + count[u]); w.used lists the MLPs met.
+  // Counting sort of the round's samples by MLP, whose counts gather() made
+  // (w.count, and w.used: the MLPs met): w.order holds the samples of MLP u
+  // at [first[u], first[u] + count[u]).
   void group_by_mlp(TileWork& w) const {
-    if (w.count.size() != m_.mlp_count()) {
-      w.count.assign(m_.mlp_count(), 0);
-      w.first.assign(m_.mlp_count(), 0);
-    }
-    w.used.clear();
     const FastSample* samples = w.samples.data();
     const uint32_t n = uint32_t(w.n_samples);
-    for (uint32_t i = 0; i < n; ++i)
-      if (w.count[samples[i].mlp]++ == 0) w.used.push_back(samples[i].mlp);
     uint32_t at = 0;
     for (uint32_t u : w.used) {
       w.first[u] = at;

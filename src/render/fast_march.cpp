@@ -33,7 +33,7 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
 
   const Bitmap3& fine = model.occupancy[int(Tier::Fine)];
   const size_t n = size_t(res) * res * res;
-  distance.assign(n, uint8_t(kMaxDistance));
+  distance.assign(n + 3, uint8_t(kMaxDistance));
   // Grow the occupied set by one fine voxel in every direction (a 3x3x3 cube,
   // three separable passes over rows of bits along x) per round: a voxel
   // reached in round r is at Chebyshev distance r.
@@ -105,42 +105,67 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
 }
 
 FastMarcher::FastMarcher(const SceneModel& model, const FastSkipGrid& skip, const Ray& ray, const MicroRay& micro_ray) {
-  st_.model = &model;
-  st_.skip = &skip;
-  st_.ray = micro_ray;
-  const MicroRay& ray_ = st_.ray;
+  set_up(model, skip, ray, micro_ray);
+}
+
+void FastMarcher::set_up(const SceneModel& model, const FastSkipGrid& skip, const Ray& ray, const MicroRay& micro_ray) {
+  int64_t k = 0, k_end = -1;
+  double exit[3] = {0, 0, 0}, scale[3] = {0, 0, 0}, offset[3] = {0, 0, 0};
   // The candidate range of SampleMarcher with the tiers: one step either side of the region.
   double t_near, t_far;
   if (!intersect_box(ray.origin, ray.dir, skip.region, t_near, t_far) || !(t_far >= 0) || !std::isfinite(t_far) ||
-      !std::isfinite(t_near))
+      !std::isfinite(t_near)) {
+    assign(model, skip, micro_ray, k, k_end, exit, scale, offset);
     return;
-  const double delta = double(ray_.delta);
+  }
+  const double delta = double(micro_ray.delta);
   // As SampleMarcher (floor and ceil of values below 2^62 after the checks above).
   const double first = std::min(std::max(t_near, 0.0) / delta - 0.5, 4e18), last = std::min(t_far / delta - 0.5, 4e18);
-  st_.k = std::max<int64_t>(0, int64_t(-ceil_small(-first)) - 1);
-  st_.k_end = int64_t(ceil_small(last)) + 1;
+  k = std::max<int64_t>(0, int64_t(-ceil_small(-first)) - 1);
+  k_end = int64_t(ceil_small(last)) + 1;
   // A candidate's float point o_m + d_m t_k (t_k rounded, then one rounding
   // per operation) lies within 3 float steps of max(|o_m|, |d_m t_k|, |p_k|)
-  // of the exact line: less than scale * 2^-22. The margin is 8 times that.
-  const double t_max = (double(st_.k_end) + 1.5) * delta;
-  double scale = double(model.micro_res);
+  // of the exact line: less than max_coord * 2^-22. The margin is 8 times that.
+  const double t_max = (double(k_end) + 1.5) * delta;
+  double max_coord = double(model.micro_res);
   for (int a = 0; a < 3; ++a)
-    scale = std::max(scale, std::abs(double(ray_.origin[a])) + std::abs(double(ray_.dir[a])) * t_max);
-  const double margin = scale * (1.0 / 524288.0);  // 2^-19
+    max_coord = std::max(max_coord, std::abs(double(micro_ray.origin[a])) + std::abs(double(micro_ray.dir[a])) * t_max);
+  const double margin = max_coord * (1.0 / 524288.0);  // 2^-19
   // skip_box: the exit face lo + exit size at the margin inside, in steps.
   for (int a = 0; a < 3; ++a) {
-    const double d = double(ray_.dir[a]), o = double(ray_.origin[a]);
+    const double d = double(micro_ray.dir[a]), o = double(micro_ray.origin[a]);
     if (d == 0.0) {
-      st_.exit[a] = 0;
-      st_.scale[a] = 0;
-      st_.offset[a] = INFINITY;
+      exit[a] = 0;
+      scale[a] = 0;
+      offset[a] = INFINITY;
       continue;
     }
     const double inv = 1.0 / (d * delta);
-    st_.exit[a] = d > 0 ? 1.0 : 0.0;
-    st_.scale[a] = inv;
-    st_.offset[a] = ((d > 0 ? -margin : margin) - o) * inv - 0.5;
+    exit[a] = d > 0 ? 1.0 : 0.0;
+    scale[a] = inv;
+    offset[a] = ((d > 0 ? -margin : margin) - o) * inv - 0.5;
   }
+  assign(model, skip, micro_ray, k, k_end, exit, scale, offset);
+}
+
+void FastMarcher::assign(const SceneModel& model, const FastSkipGrid& skip, const MicroRay& micro_ray, int64_t k,
+                         int64_t k_end, const double exit[3], const double scale[3], const double offset[3]) {
+  st_.model = &model;
+  st_.skip = &skip;
+  st_.ray = micro_ray;
+  for (int a = 0; a < 3; ++a) {
+    st_.exit[a] = exit[a];
+    st_.scale[a] = scale[a];
+    st_.offset[a] = offset[a];
+  }
+  st_.k = k;
+  st_.k_end = k_end;
+  st_.chunk_k = 0;
+  st_.pending = 0;
+  st_.dense = false;
+  st_.block = -1;
+  st_.checks = 0;
+  st_.found_next = 0;
 }
 
 bool FastMarcher::next(MarchSample& s) {

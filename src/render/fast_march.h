@@ -37,7 +37,9 @@ struct FastSkipGrid {
   static constexpr int kMaxDistance = 15;  // cap, fine voxels
   int res = 0;                             // fine resolution
   Box3d region;  // scene units: the object AABB's micro voxels widened by one, where candidates are considered
-  std::vector<uint8_t> distance;  // 0: occupied; r: every fine voxel within r - 1 is empty
+  // Per fine voxel: 0: occupied; r: every fine voxel within r - 1 is empty.
+  // Followed by 3 bytes of padding, so that a 32-bit read at any voxel stays inside.
+  std::vector<uint8_t> distance;
   // Per fine voxel f (linear index x + res (y + res z)) two 32-bit words:
   // bit lx + 4 ly + 16 (lz & 1) of word 2 f + (lz >> 1) is set iff micro
   // voxel (lx, ly, lz) of it is occupied (the 64-bit mask of its 4x4x4 micro
@@ -53,6 +55,16 @@ struct FastSkipGrid {
 class FastMarcher {
  public:
   FastMarcher(const SceneModel& model, const FastSkipGrid& skip, const Ray& ray, const MicroRay& micro_ray);
+  // A marcher without candidates, to be set up (set_up, or fast_setup_rays).
+  FastMarcher() = default;
+
+  // What the constructor does, on an existing marcher.
+  void set_up(const SceneModel& model, const FastSkipGrid& skip, const Ray& ray, const MicroRay& micro_ray);
+  // A fresh march of micro_ray over candidates [k, k_end] with skip_box's
+  // terms per axis (State::exit, scale, offset), computed by the caller as
+  // set_up does.
+  void assign(const SceneModel& model, const FastSkipGrid& skip, const MicroRay& micro_ray, int64_t k, int64_t k_end,
+              const double exit[3], const double scale[3], const double offset[3]);
 
   // The next sample; false once the ray has no more.
   bool next(MarchSample& s);
@@ -78,6 +90,8 @@ class FastMarcher {
     int64_t chunk_k = 0;        // first candidate of the last chunk tested
     uint32_t pending = 0;       // its samples not handed out yet: bit i for candidate chunk_k + i
     bool dense = false;         // the last chunk tested held a sample: test the next one without a lookup
+    int32_t block = -1;
+    uint64_t checks = 0;
     // The last chunk's samples in order, as the vector test found them: the
     // candidate's lane (k - chunk_k), point, micro voxel and fine voxel
     // index; entries [found_next, found_next + popcount(pending)) are pending.
@@ -87,8 +101,6 @@ class FastMarcher {
     alignas(64) float found_p[3][kMaxChunk];
     alignas(64) int32_t found_v[3][kMaxChunk];
     alignas(64) int32_t found_fine[kMaxChunk];
-    uint64_t checks = 0;
-    int32_t block = -1;
 
     // A candidate after k (whose point lies in the box of `size` micro
     // voxels from micro voxel `lo`) such that every candidate between them
@@ -132,5 +144,23 @@ inline constexpr int kFastMarchGroup = 4;
 // vector of consecutive candidates is tested against the micro masks at once.
 void fast_march_group(FastMarcher* const* marchers, int n, int limit, MarchSample* samples, int32_t* blocks,
                       int* counts, bool* ended);
+
+// The marchers of n rays of a tile: ray r < n through the centre of pixel
+// (x0 + r % tw, y0 + r / tw). marchers[r] ends up as set_up(model, skip,
+// camera.pixel_ray(...), make_micro_ray(model, ray, delta)) leaves it, bit for
+// bit, with the per-ray divisions and square roots in SIMD lanes (rays with a
+// zero or tiny direction component, or candidate indices from 2^51 on, take
+// set_up itself), and then advanced in the lanes through the empty space in
+// front of the object: the march's jumps from fine voxels at distance 3 or
+// more (and its single steps past candidates outside the grid) are made
+// there until a candidate at distance 2 or less, exactly as the march would
+// make them (the same candidates, the same occupancy_checks count); the
+// vector test from that candidate is left to the march (marked dense: it
+// makes no second lookup). Also writes the unit
+// direction as floats (dx, dy, dz)[r], and hit_aabb[r]: whether the march has
+// candidates and the ray meets `aabb` (intersect_box) with t_far >= 0.
+void fast_setup_rays(const SceneModel& model, const FastSkipGrid& skip, const Camera& camera, float delta,
+                     const Box3d& aabb, int x0, int y0, int tw, int n, FastMarcher* marchers, float* dx, float* dy,
+                     float* dz, bool* hit_aabb);
 
 }  // namespace edrnr

@@ -101,6 +101,126 @@ TEST(Fast, MarchYieldsTheReferenceSamples) {
   }
 }
 
+// The march's first steps as fast_setup_rays is to make them, written out
+// from the march's rules: from a candidate in an empty fine voxel at
+// distance r >= 3, a jump past the empty cube of fine voxels around it;
+// past a candidate outside the grid, one step; up to a candidate at
+// distance 2 or less (whose vector test is next: dense), or the end. Each
+// distance lookup is an occupancy check.
+void approach(FastMarcher::State& st, const SceneModel& m, const FastSkipGrid& skip) {
+  const float hi = float(m.micro_res);
+  while (st.k <= st.k_end) {
+    const Vec3f p = st.ray.point(st.k);
+    if (!(p.x >= 0.f && p.x <= hi && p.y >= 0.f && p.y <= hi && p.z >= 0.f && p.z <= hi)) {
+      ++st.k;
+      continue;
+    }
+    const Vec3i f{std::min(int(p.x), m.micro_res - 1) / 4, std::min(int(p.y), m.micro_res - 1) / 4,
+                  std::min(int(p.z), m.micro_res - 1) / 4};
+    const int r = skip.at(f.x, f.y, f.z);
+    ++st.checks;
+    if (r <= 2) {
+      st.dense = true;
+      return;
+    }
+    st.k = st.skip_box(st.k, Vec3i{4 * (f.x - r + 1), 4 * (f.y - r + 1), 4 * (f.z - r + 1)}, 4 * (2 * r - 1));
+  }
+}
+
+// The tile set-up in SIMD lanes leaves every marcher as the scalar set-up
+// and the march's first steps do, bit for bit, and gives the same
+// directions and AABB hits; marched on, each yields the samples and
+// occupancy checks of a marcher built by the constructor. Cameras around,
+// inside and far from the object, and one looking along -z whose centre
+// rays have zero direction components (the lanes the scalar code takes
+// over). Tiles of 77 rays leave partial vectors.
+TEST(Fast, RaySetupInLanesEqualsTheScalarSetUp) {
+  const SceneModel m = several_model(64, false);
+  const FastSkipGrid skip(m);
+  const Box3d aabb{m.object_aabb.lo.cast<double>(), m.object_aabb.hi.cast<double>()};
+  Camera axis;
+  axis.width = 9;
+  axis.height = 7;
+  axis.fx = axis.fy = 6;
+  axis.cx = 4.5;
+  axis.cy = 3.5;
+  axis.c2w = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 3, 0, 0, 0, 1};
+  std::vector<Camera> cams = views(23, 19);
+  cams.push_back(orbit_camera(17, 17, 40, 10, 0.3, 120));
+  cams.push_back(orbit_camera(21, 21, 30, 20, 1.5e7, 1.6e-5));
+  cams.push_back(axis);
+  int zero_components = 0, hits = 0, empties = 0, advanced = 0;
+  size_t samples = 0;
+  for (float step : {1.f, 0.43f}) {
+    const float delta = sample_spacing(m, step);
+    for (size_t c = 0; c < cams.size(); ++c) {
+      const Camera& cam = cams[c];
+      for (int y0 = 0; y0 < cam.height; y0 += 7)
+        for (int x0 = 0; x0 < cam.width; x0 += 11) {
+          const int tw = std::min(11, cam.width - x0), n = tw * std::min(7, cam.height - y0);
+          std::vector<FastMarcher> lanes(static_cast<size_t>(n));
+          std::vector<float> dx(static_cast<size_t>(n)), dy(dx), dz(dx);
+          bool hit[77];
+          fast_setup_rays(m, skip, cam, delta, aabb, x0, y0, tw, n, lanes.data(), dx.data(), dy.data(), dz.data(), hit);
+          for (int r = 0; r < n; ++r) {
+            SCOPED_TRACE(testing::Message()
+                         << "camera " << c << " step " << step << " pixel " << x0 + r % tw << "," << y0 + r / tw);
+            const Ray ray = cam.pixel_ray(x0 + r % tw, y0 + r / tw);
+            zero_components += (ray.dir.x == 0) + (ray.dir.y == 0) + (ray.dir.z == 0);
+            FastMarcher ref;
+            ref.set_up(m, skip, ray, make_micro_ray(m, ray, delta));
+            const bool had_candidates = !ref.empty();
+            const int64_t k0 = ref.state().k;
+            approach(ref.state(), m, skip);
+            advanced += ref.state().k > k0;
+            const FastMarcher::State& a = ref.state();
+            const FastMarcher::State& b = lanes[size_t(r)].state();
+            ASSERT_EQ(a.k, b.k);
+            ASSERT_EQ(a.k_end, b.k_end);
+            ASSERT_EQ(a.ray.origin, b.ray.origin);
+            ASSERT_EQ(a.ray.dir, b.ray.dir);
+            ASSERT_EQ(a.ray.delta, b.ray.delta);
+            for (int ax = 0; ax < 3; ++ax) {
+              ASSERT_EQ(a.exit[ax], b.exit[ax]);
+              ASSERT_EQ(a.scale[ax], b.scale[ax]);
+              ASSERT_EQ(a.offset[ax], b.offset[ax]);
+            }
+            ASSERT_EQ(a.checks, b.checks);
+            ASSERT_EQ(a.dense, b.dense);
+            ASSERT_EQ(b.model, &m);
+            ASSERT_EQ(b.skip, &skip);
+            ASSERT_EQ(b.pending, 0u);
+            ASSERT_EQ(dx[size_t(r)], float(ray.dir.x));
+            ASSERT_EQ(dy[size_t(r)], float(ray.dir.y));
+            ASSERT_EQ(dz[size_t(r)], float(ray.dir.z));
+            double tn, tf;
+            const bool expect_hit = had_candidates && intersect_box(ray.origin, ray.dir, aabb, tn, tf) && tf >= 0;
+            ASSERT_EQ(hit[r], expect_hit);
+            hits += hit[r];
+            empties += !had_candidates;
+            FastMarcher whole(m, skip, ray, make_micro_ray(m, ray, delta));
+            MarchSample x, y;
+            for (;;) {
+              const bool more = whole.next(x);
+              ASSERT_EQ(lanes[size_t(r)].next(y), more);
+              if (!more) break;
+              ASSERT_EQ(x.k, y.k);
+              ASSERT_EQ(x.voxel, y.voxel);
+              ASSERT_EQ(x.p_micro, y.p_micro);
+              ++samples;
+            }
+            ASSERT_EQ(whole.occupancy_checks(), lanes[size_t(r)].occupancy_checks());
+          }
+        }
+    }
+  }
+  EXPECT_GT(zero_components, 0);
+  EXPECT_GT(hits, 100);
+  EXPECT_GT(empties, 100);
+  EXPECT_GT(advanced, 100);
+  EXPECT_GT(samples, 1000u);
+}
+
 // From a camera so far away that the candidate indices pass 2^30 (where the
 // vector test gives way to one candidate at a time), the samples are still
 // the reference's.
