@@ -25,6 +25,10 @@ struct RayState {
   std::array<int64_t, 3> color{};
   // Direction encoding codes (dir_dims values, Tme::encode_direction), once per ray.
   std::vector<int32_t> dir_code;
+  // The TME's direction inputs made from dir_code (Tme::direction_input),
+  // kept by a consumer that evaluates the ray's samples in several batches.
+  std::vector<int32_t> dir_input;
+  uint64_t dir_input_saturations = 0;
 
   // Still marching: not stopped by the VRU and not past the box.
   bool live() const { return valid && !terminated && k < k_end; }

@@ -69,10 +69,18 @@ void BatchArithmetic::run(RayPacket& p, Flight& f) {
     const uint8_t r = f.rays[i];
     if (dir_batch_[r] != batch_) {
       RayState& ray = p.rays[r];
-      // The front end leaves the encoding to this thread (once per ray).
-      if (ray.dir_code.empty())
-        ray.dir_code = Tme::encode_direction(ray.world_dir, model_.mlp_arch.dir_frequencies, n_);
-      tme_.direction_input(ray.dir_code, dirs_[r]);
+      if (ray.dir_input.empty()) {
+        // The front end leaves the encoding to this thread; both the codes and
+        // the inputs made from them are kept with the ray for its next batches.
+        if (ray.dir_code.empty())
+          ray.dir_code = Tme::encode_direction(ray.world_dir, model_.mlp_arch.dir_frequencies, n_);
+        tme_.direction_input(ray.dir_code, dirs_[r]);
+        ray.dir_input = dirs_[r].x;
+        ray.dir_input_saturations = dirs_[r].saturations;
+      } else {
+        dirs_[r].x.assign(ray.dir_input.begin(), ray.dir_input.end());
+        dirs_[r].saturations = ray.dir_input_saturations;
+      }
       dir_batch_[r] = batch_;
     }
     dir_of_sample_[i] = &dirs_[r];
