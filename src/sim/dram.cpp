@@ -230,19 +230,22 @@ void DramSystem::advance_idle(uint64_t target) {
       tick();
       continue;
     }
-    // Cycles [cycle_, next): no command issues and nothing completes, so each
-    // tick would only count one background cycle per rank and advance the clock.
-    const uint64_t k = next - cycle_;
-    for (const Channel& ch : channels_)
-      for (const Rank& rank : ch.ranks) {
-        const uint64_t active =
-            rank.open_banks > 0 ? k : (rank.refresh_end > cycle_ ? std::min(k, rank.refresh_end - cycle_) : 0);
-        active_rank_cycles_ += active;
-        precharged_rank_cycles_ += k - active;
-      }
-    cycle_ += k;
-    cycles_ += k;
+    skip_quiet(next - cycle_);
   }
+}
+
+void DramSystem::skip_quiet(uint64_t k) {
+  // No command issues and nothing completes, so the banks stay as they are:
+  // each tick would count one background cycle per rank and advance the clock.
+  for (const Channel& ch : channels_)
+    for (const Rank& rank : ch.ranks) {
+      const uint64_t active =
+          rank.open_banks > 0 ? k : (rank.refresh_end > cycle_ ? std::min(k, rank.refresh_end - cycle_) : 0);
+      active_rank_cycles_ += active;
+      precharged_rank_cycles_ += k - active;
+    }
+  cycle_ += k;
+  cycles_ += k;
 }
 
 uint64_t DramSystem::next_event_cycle() const {
@@ -260,19 +263,7 @@ void DramSystem::advance_quiet(uint64_t target) {
       tick();
       continue;
     }
-    // Cycles [cycle_, next): no command issues and nothing completes, so the
-    // banks stay as they are: each tick would count one background cycle per
-    // rank and advance the clock.
-    const uint64_t k = next - cycle_;
-    for (const Channel& ch : channels_)
-      for (const Rank& rank : ch.ranks) {
-        const uint64_t active =
-            rank.open_banks > 0 ? k : (rank.refresh_end > cycle_ ? std::min(k, rank.refresh_end - cycle_) : 0);
-        active_rank_cycles_ += active;
-        precharged_rank_cycles_ += k - active;
-      }
-    cycle_ += k;
-    cycles_ += k;
+    skip_quiet(next - cycle_);  // cycles [cycle_, next)
   }
 }
 

@@ -187,6 +187,8 @@ class DramSystem {
   bool try_refresh(uint32_t channel_index);
   bool cas_ready(const Channel& ch, const Burst& b) const;
   bool act_ready(const Rank& rank, const Bank& bank) const;
+  // Advances k cycles in which no command issues and nothing completes.
+  void skip_quiet(uint64_t k);
   void issue_activate(uint32_t ch, Burst& b);
   void issue_precharge(uint32_t ch, uint32_t rank, uint32_t bank);
   void issue_cas(uint32_t ch, const Burst& b);
