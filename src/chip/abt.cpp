@@ -5,12 +5,17 @@
 namespace edrnr::chip {
 
 Abt::Abt(const Vec3d& box_lo, const Vec3d& box_hi, const FloatFormat& ray_float)
-    : lo_(box_lo), hi_(box_hi), rf_(ray_float) {}
+    : lo_(box_lo), hi_(box_hi), rf_(ray_float) {
+  for (int a = 0; a < 3; ++a) {
+    lo_wide_[a] = rf_.round(lo_[a] - 1.0);
+    hi_wide_[a] = rf_.round(hi_[a] + 1.0);
+  }
+}
 
 bool Abt::hits(const ChipRay& ray) const {
   double t_near = 0.0, t_far = rf_.max_finite();
   for (int a = 0; a < 3; ++a) {
-    const double lo = rf_.round(lo_[a] - 1.0), hi = rf_.round(hi_[a] + 1.0);
+    const double lo = lo_wide_[a], hi = hi_wide_[a];
     const double o = ray.origin[a], d = ray.dir[a];
     if (d == 0.0) {
       if (o < lo || o > hi) return false;

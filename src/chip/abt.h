@@ -26,6 +26,7 @@ class Abt {
 
  private:
   Vec3d lo_, hi_;
+  Vec3d lo_wide_, hi_wide_;  // the box widened by one micro voxel, in the ray float
   FloatFormat rf_;
 };
 

@@ -25,17 +25,26 @@ int64_t first_true(int64_t lo, int64_t hi, Pred pred) {
 
 // The number of predicate evaluations first_true(lo, hi, pred) makes when
 // its answer is `e`: the bisection's path follows from e alone (pred(k) is
-// k >= e on a monotone predicate), so it is replayed without evaluating.
+// k >= e on a monotone predicate), so it is replayed without evaluating. On
+// n = hi - lo candidates, the answer's offset j = e - lo in [0, n], a step
+// keeps the n / 2 (rounded down) below the midpoint when j <= n / 2, else
+// the rest above it. With n + 1 a power of two every path takes log2(n + 1)
+// more steps; with n a power of two 2^b, every path takes b steps, one more
+// for j <= 1 (by induction: j <= n / 2 halves n, j > n / 2 leaves n / 2 - 1).
 uint64_t first_true_steps(int64_t lo, int64_t hi, int64_t e) {
+  if (lo >= hi) return 0;
+  uint64_t n = uint64_t(hi - lo);
+  uint64_t j = e <= lo ? 0 : std::min(uint64_t(e - lo), n);  // an answer outside [lo, hi] walks as its end does
+  if (std::has_single_bit(n)) return uint64_t(std::countr_zero(n)) + (j <= 1 ? 1 : 0);
   uint64_t steps = 0;
-  while (lo < hi) {
-    const int64_t mid = lo + (hi - lo) / 2;
+  while ((n & (n + 1)) != 0) {  // n + 1 is not a power of two (n > 0 here)
+    const uint64_t half = n >> 1;
+    const bool above = j > half;
+    n = above ? n - half - 1 : half;  // conditional moves: no branch on the path
+    j = above ? j - half - 1 : j;
     ++steps;
-    const bool p = mid >= e;
-    hi = p ? mid : hi;
-    lo = p ? lo : mid + 1;
   }
-  return steps;
+  return steps + uint64_t(std::bit_width(n));  // n = 2^b - 1: b more steps
 }
 
 // first_true(lo, hi, pred) found from a guess: a few steps from it, checked
@@ -91,7 +100,10 @@ void RayMath::make_thresholds() {
     const double mid = std::has_single_bit(unsigned(f)) ? F - 0.25 * step : F - 0.5 * step;
     const bool below_ok = fmt_.round(std::nextafter(mid, -inf)) < F;
     const bool above_ok = fmt_.round(std::nextafter(mid, inf)) >= F;
-    if (!below_ok || !above_ok || fmt_.round(F) != F) return;  // no fast tests for this format
+    // micro_index_at relies on every threshold lying in [f - 1/2, f) (true
+    // whenever every integer below Rm is a format value; checked anyway).
+    const bool near_f = mid >= F - 0.5 && mid < F;
+    if (!below_ok || !above_ok || !near_f || fmt_.round(F) != F) return;  // no fast tests for this format
     th[size_t(f)] = {mid, fmt_.round(mid) >= F};
   }
   thresholds_ = std::move(th);
@@ -151,6 +163,72 @@ int64_t RayMath::cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Ve
       }
     }
     best = std::min(best, e);
+  }
+  if (evals) *evals += n;
+  return best;
+}
+
+namespace {
+// The evaluations cell_exit's search makes on one axis over [lo, hi) from the
+// clamped guess g when the first candidate outside is e (hi: none): the guess,
+// one neighbour, then a bisection of the rest (its path follows from e).
+uint64_t exit_search_steps(int64_t lo, int64_t hi, int64_t g, int64_t e) {
+  if (g >= e) {  // the guess is outside
+    if (g == lo || g == e) return g == lo ? 1 : 2;
+    return 2 + first_true_steps(lo, g - 1, e);
+  }
+  if (g + 1 >= hi) return 1;
+  if (g + 1 == e) return 2;
+  return 2 + first_true_steps(g + 2, hi, e);
+}
+}  // namespace
+
+int64_t RayMath::cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& c, int cell_micro, uint64_t* evals,
+                           ExitMemo& memo, int64_t k_limit) const {
+  if (thresholds_.empty()) return cell_exit_rounded(r, k0, k_end, c, cell_micro, evals);
+  // The point of k0 is in the cell, so along an axis the candidates after k0
+  // are outside exactly when they are past the far face (the coordinate is
+  // monotone): the first of them depends on the ray and that face only, and
+  // is found once over [k0 + 1, k_limit). The search of cell_exit over
+  // [lo, hi) then answers min(first, hi), and its evaluations follow from
+  // that answer and its guess.
+  int64_t best = k_end;
+  uint64_t n = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double d = r.dir[a];
+    if (d == 0.0) continue;  // the coordinate never changes
+    const int face = d > 0 ? (c[a] + 1) * cell_micro : c[a] * cell_micro;
+    if ((d > 0 && face >= micro_res_) || (d < 0 && face <= 0)) continue;  // the last cell: only the box ends it
+    const int64_t lo = k0 + 1, hi = best;                                 // only an exit before `best` matters
+    if (lo >= hi) break;
+    std::array<FaceCrossing, 2>& kept = memo.axis[size_t(a)];
+    if (kept[0].face != face) {
+      if (kept[1].face == face) {
+        std::swap(kept[0], kept[1]);
+      } else {
+        kept[1] = kept[0];
+        FaceCrossing& x = kept[0];
+        x.face = face;
+        x.guess = std::ceil((double(face) - r.origin[a]) / (d * step_) - 0.5);
+        const double o = r.origin[a];
+        const Threshold th = thresholds_[size_t(face)];
+        if (d > 0)
+          x.first = first_true_from(lo, k_limit, x.guess, [&](int64_t k) {
+            const double prod = d * t_of(k);
+            return sum_at_least(prod, o, prod + o, th);
+          });
+        else
+          x.first = first_true_from(lo, k_limit, x.guess, [&](int64_t k) {
+            const double prod = d * t_of(k);
+            return !sum_at_least(prod, o, prod + o, th);
+          });
+      }
+    }
+    const FaceCrossing& x = kept[0];
+    const int64_t g = std::isfinite(x.guess) ? int64_t(std::clamp(x.guess, double(lo), double(hi - 1))) : hi - 1;
+    const int64_t e = std::min(x.first, hi);
+    n += exit_search_steps(lo, hi, g, e);
+    best = e;  // e <= hi == best
   }
   if (evals) *evals += n;
   return best;

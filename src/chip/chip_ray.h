@@ -98,11 +98,11 @@ class RayMath {
   int micro_index_at(const ChipRay& r, int64_t k, int a) const {
     if (thresholds_.empty()) return micro_index(coord(r, k, a));
     const double o = r.origin[a], prod = r.dir[a] * t_of(k), s = prod + o;
-    // The sum's truncation is a guess that rounding moves by at most one voxel.
-    int m = s >= 0.0 ? (s < double(micro_res_) ? int(s) : micro_res_ - 1) : 0;
-    while (m > 0 && !sum_at_least(prod, o, s, m)) --m;
-    while (m + 1 < micro_res_ && sum_at_least(prod, o, s, m + 1)) ++m;
-    return m;
+    // The sum's truncation m, or m + 1 when the sum passes that threshold.
+    // Every threshold lies in [f - 1/2, f) (see make_thresholds), so a sum
+    // s >= m passes m's and one below m + 1 cannot pass m + 2's.
+    const int m = s >= 0.0 ? (s < double(micro_res_) ? int(s) : micro_res_ - 1) : 0;
+    return m + 1 < micro_res_ && sum_at_least(prod, o, s, m + 1) ? m + 1 : m;
   }
   // micro_voxel(point(r, k)), exactly.
   Vec3i micro_voxel_at(const ChipRay& r, int64_t k) const {
@@ -117,6 +117,24 @@ class RayMath {
   // positions computed.
   int64_t cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& cell, int cell_micro,
                     uint64_t* evals = nullptr) const;
+
+  // Where one ray crosses the faces it met last, per axis: a ray crosses a
+  // given face of an axis at one candidate whatever cell it leaves through
+  // it, so a cell exit needs only the faces it has not met yet. A memo
+  // belongs to one ray and one k_limit; value-initialise it (no face) for a
+  // new ray.
+  struct FaceCrossing {
+    int face = 0;       // micro-grid coordinate of the face; 0: none (never a far face that is searched)
+    double guess = 0;   // the search's first guess for it
+    int64_t first = 0;  // min(first candidate past it, k_limit)
+  };
+  struct ExitMemo {
+    std::array<std::array<FaceCrossing, 2>, 3> axis{};  // per axis, the latest face first
+  };
+  // cell_exit(r, k0, k_end, cell, cell_micro, evals), the same result and
+  // count, with k_end <= k_limit and the crossings kept in `memo`.
+  int64_t cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& cell, int cell_micro, uint64_t* evals,
+                    ExitMemo& memo, int64_t k_limit) const;
 
   // The run of candidates k >= 0 whose point lies in the closed box
   // [lo, hi] (micro units), found exactly by bisection on each axis bound.

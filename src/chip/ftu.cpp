@@ -52,6 +52,8 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
   std::array<int64_t, kRaysPerPacket> known_k{};
   std::array<Vec3i, kRaysPerPacket> known_f{};
   uint8_t known = 0;
+  // Each ray's face crossings, shared by its fine-voxel and leaf exits.
+  std::array<RayMath::ExitMemo, kRaysPerPacket> crossings{};
   for (;;) {
     // The live rays inside the CV, and their fine voxels.
     uint8_t active = 0;
@@ -83,7 +85,8 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
       for (int r = 0; r < kRaysPerPacket; ++r) {
         if (!(sel.selected_mask >> r & 1)) continue;
         RayState& ray = rp.rays[size_t(r)];
-        ray.k = math_.cell_exit(ray.ray, ray.k, ray.k_end, sel.voxel, kMicroPerFine, &counters_.position_evals);
+        ray.k = math_.cell_exit(ray.ray, ray.k, ray.k_end, sel.voxel, kMicroPerFine, &counters_.position_evals,
+                                crossings[size_t(r)], ray.k_end);
       }
       continue;
     }
@@ -102,8 +105,9 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
     for (int r = 0; r < kRaysPerPacket; ++r) {
       if (!(sel.selected_mask >> r & 1)) continue;
       RayState& ray = rp.rays[size_t(r)];
-      const int64_t k_exit =
-          math_.cell_exit(ray.ray, ray.k, ray.k_end, sel.voxel, kMicroPerFine, &counters_.position_evals);
+      RayMath::ExitMemo& memo = crossings[size_t(r)];
+      const int64_t k_exit = math_.cell_exit(ray.ray, ray.k, ray.k_end, sel.voxel, kMicroPerFine,
+                                             &counters_.position_evals, memo, ray.k_end);
       int64_t k = ray.k;
       Vec3i m;
       bool m_known = false;  // m is already the micro voxel of candidate k (evaluated again, counted again)
@@ -115,7 +119,8 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
         ++counters_.leaf_checks;
         if (!leaf_occupied(word, leaf.x, leaf.y, leaf.z)) {
           const Vec3i leaf_cell{m.x / kLeafCellMicro, m.y / kLeafCellMicro, m.z / kLeafCellMicro};
-          k = math_.cell_exit(ray.ray, k, k_exit, leaf_cell, kLeafCellMicro, &counters_.position_evals);
+          k = math_.cell_exit(ray.ray, k, k_exit, leaf_cell, kLeafCellMicro, &counters_.position_evals, memo,
+                              ray.k_end);
           continue;
         }
         // Occupied leaf: test each candidate until the ray leaves the leaf.

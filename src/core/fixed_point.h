@@ -10,6 +10,7 @@
 // lies in [-2^(N-1), 2^(N-1)-1] (N in 1..64); an unsigned N-bit value in
 // [0, 2^N-1] (N in 0..63). A fixed-point number with F fraction bits stores
 // the integer q and stands for q * 2^-F.
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -172,12 +173,55 @@ constexpr int64_t requantize(int64_t x, Requant q) {
 // multiplier_bits is out of range.
 Requant requant_from_scale(double scale, int multiplier_bits);
 
+namespace detail {
+// round(v * 2^frac_bits) as an int64_t (saturated), before the N-bit clamp.
+inline int64_t round_scaled(double v, int frac_bits, Rounding mode) {
+  constexpr int64_t kMax = std::numeric_limits<int64_t>::max();
+  constexpr int64_t kMin = std::numeric_limits<int64_t>::min();
+  constexpr double kTwo63 = 9223372036854775808.0;
+  if (v != v) return 0;
+  if (frac_bits > 1000) frac_bits = 1000;
+  if (frac_bits < -1000) frac_bits = -1000;
+  // v * 2^frac_bits, as std::ldexp gives it (both are the correctly rounded
+  // product; 2^frac_bits is a normal double for |frac_bits| <= 1000).
+  const double s = v * std::bit_cast<double>(uint64_t(1023 + frac_bits) << 52);
+  if (s == 0.0) {
+    // A negative v whose scaled value underflowed lies in (-1, 0).
+    return (v < 0.0 && mode == Rounding::Floor) ? -1 : 0;
+  }
+  if (s >= kTwo63) return kMax;
+  if (s <= -kTwo63) return kMin;  // floor(s) <= -2^63
+  // floor(s) without a library call: truncation toward zero (exact in this
+  // range), one less for a negative s with a fraction. The integer converts
+  // back exactly (below 2^53 in magnitude, or s was already an integer).
+  int64_t q = int64_t(s);
+  if (double(q) > s) --q;
+  const double frac = s - double(q);  // exact: the fraction bits of s, in [0, 1)
+  bool up = false;
+  switch (mode) {
+    case Rounding::Floor:
+      break;
+    case Rounding::HalfUp:
+      up = frac >= 0.5;
+      break;
+    case Rounding::HalfEven:
+      up = frac > 0.5 || (frac == 0.5 && (q & 1) != 0);
+      break;
+  }
+  return q + (up ? 1 : 0);  // q < 2^63 - 1 whenever frac > 0
+}
+}  // namespace detail
+
 // The fixed-point value round(v * 2^frac_bits) saturated to a signed /
 // unsigned N-bit integer. The scaling by 2^frac_bits is exact, so the value
 // is rounded once. NaN gives 0; +-infinity saturates. frac_bits is clamped to
 // [-1000, 1000].
-int64_t to_fixed(double v, int frac_bits, int bits, Rounding mode);
-int64_t to_fixed_unsigned(double v, int frac_bits, int bits, Rounding mode);
+inline int64_t to_fixed(double v, int frac_bits, int bits, Rounding mode) {
+  return saturate(detail::round_scaled(v, frac_bits, mode), bits);
+}
+inline int64_t to_fixed_unsigned(double v, int frac_bits, int bits, Rounding mode) {
+  return saturate_unsigned(detail::round_scaled(v, frac_bits, mode), bits);
+}
 
 // The value q * 2^-frac_bits. Exact when |q| < 2^53 (otherwise the nearest
 // double, ties to even).
