@@ -87,6 +87,8 @@ std::vector<TmeLayer> compile_net(const std::vector<DenseQ>& net, const std::vec
     for (int j = 0; j < t.out; ++j)
       for (int i = 0; i < t.in; ++i)
         t.wt[size_t(i) * size_t(t.out_pad) + size_t(j)] = t.w[size_t(j) * size_t(t.in) + size_t(i)];
+    if (n.activation_bits <= 16)  // every input fits int16
+      t.wt_pairs = tme_pair_weights(t.wt.data(), size_t(t.in), size_t(t.out_pad));
     const int A = n.accumulator_bits;
     const int64_t x_max = int64_t(1) << (n.activation_bits - 1);  // |x| <= 2^(activation_bits-1)
     t.bias_sat.resize(size_t(d.out));
@@ -259,7 +261,11 @@ void Tme::layer_batch(const TmeLayer& L, size_t samples, const int32_t* x, int32
   const int A = n_.accumulator_bits;
   const size_t W = kMaxLayerWidth;
   const int main_in = split >= 0 ? split : L.in;
-  tme_dot_columns(L.wt.data(), size_t(L.out_pad), 0, size_t(main_in), x, W, samples, sum_main_.data(), W);
+  if (!L.wt_pairs.empty())
+    tme_dot_columns_pairs(L.wt_pairs.data(), L.wt.data(), size_t(L.out_pad), size_t(main_in), x, W, samples,
+                          sum_main_.data(), W);
+  else
+    tme_dot_columns(L.wt.data(), size_t(L.out_pad), 0, size_t(main_in), x, W, samples, sum_main_.data(), W);
   uint64_t saturations = L.bias_saturations * samples;
   if (hidden && split < 0 && L.requant_vector && L.requant_rounding == M) {
     // Every sum is exact and every requantization fits 64 bits: the same

@@ -46,6 +46,7 @@ struct TmeLayer {
   // The same layer arranged for the batched GEMM (tme_kernel.h):
   int out_pad = 0;                 // out rounded up to a multiple of kTmeLanePad
   std::vector<int32_t> wt;         // in x out_pad: the weights transposed, padding zero
+  std::vector<int16_t> wt_pairs;   // wt in tme_dot_columns_pairs' layout; empty when inputs may exceed int16
   std::vector<int64_t> bias_sat;   // out: the bias saturated to the accumulator
   std::vector<uint8_t> sum_exact;  // out: 1 if no partial sum can reach the accumulator's limits
   uint64_t bias_saturations = 0;   // neurons whose bias_sat differs from bias (counted per evaluation)

@@ -2,6 +2,9 @@
 // (hwy/foreach_target.h) and picked at run time (HWY_DYNAMIC_DISPATCH).
 #include "chip/tme_kernel.h"
 
+#include <cstring>
+#include <stdexcept>
+
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "chip/tme_kernel.cpp"
 #include <hwy/foreach_target.h>  // before highway.h
@@ -32,6 +35,60 @@ void DotColumns(const int32_t* HWY_RESTRICT wt, size_t out_pad, size_t i_begin, 
       hn::StoreU(hn::Add(acc0, acc1), d, ys + j);
     }
   }
+}
+
+// tme_dot_columns_pairs (tme_kernel.h): two inputs per 32-bit lane, their
+// products summed in pairs (ReorderWidenMulAccumulate: one multiply-add of
+// 16-bit pairs per lane on x86).
+void DotColumnsPairs(const int16_t* HWY_RESTRICT wp, const int32_t* HWY_RESTRICT wt, size_t out_pad, size_t i_end,
+                     const int32_t* HWY_RESTRICT x, size_t x_stride, size_t samples, int32_t* HWY_RESTRICT y,
+                     size_t y_stride) {
+#if HWY_TARGET == HWY_SCALAR
+  (void)wp;
+  DotColumns(wt, out_pad, 0, i_end, x, x_stride, samples, y, y_stride);
+#else
+  const hn::ScalableTag<int32_t> d;
+  const hn::Repartition<int16_t, decltype(d)> d16;
+  const size_t n = hn::Lanes(d);
+  const hn::Rebind<int16_t, decltype(d)> dh;
+  const size_t pairs = i_end / 2;
+  // Two samples at a time, sharing the weight loads. Their inputs 2p and
+  // 2p + 1 side by side, each pair read as one 32-bit word.
+  HWY_ALIGN int16_t packed[2][2 * kTmeMaxPairs];
+  auto pack = [&](const int32_t* xs, int16_t* to) {
+    size_t i = 0;
+    for (; i + n <= 2 * pairs; i += n) hn::StoreU(hn::DemoteTo(dh, hn::LoadU(d, xs + i)), dh, to + i);
+    for (; i < 2 * pairs; ++i) to[i] = int16_t(xs[i]);
+  };
+  auto pair = [&](int which, size_t p) {
+    int32_t v;
+    std::memcpy(&v, packed[which] + 2 * p, sizeof v);
+    return hn::BitCast(d16, hn::Set(d, v));
+  };
+  for (size_t s = 0; s < samples; s += 2) {
+    const size_t s1 = s + 1 < samples ? s + 1 : s;  // an odd last sample is computed twice
+    const int32_t* xa = x + s * x_stride;
+    const int32_t* xb = x + s1 * x_stride;
+    pack(xa, packed[0]);
+    pack(xb, packed[1]);
+    for (size_t j = 0; j < out_pad; j += n) {
+      auto a0 = hn::Zero(d), a1 = hn::Zero(d), b0 = hn::Zero(d), b1 = hn::Zero(d);
+      for (size_t p = 0; p < pairs; ++p) {
+        const auto w = hn::LoadU(d16, wp + 2 * (p * out_pad + j));
+        a0 = hn::ReorderWidenMulAccumulate(d, w, pair(0, p), a0, a1);
+        b0 = hn::ReorderWidenMulAccumulate(d, w, pair(1, p), b0, b1);
+      }
+      auto sa = hn::RearrangeToOddPlusEven(a0, a1), sb = hn::RearrangeToOddPlusEven(b0, b1);
+      if (i_end % 2) {
+        const auto w = hn::LoadU(d, wt + (i_end - 1) * out_pad + j);
+        sa = hn::Add(sa, hn::Mul(w, hn::Set(d, xa[i_end - 1])));
+        sb = hn::Add(sb, hn::Mul(w, hn::Set(d, xb[i_end - 1])));
+      }
+      hn::StoreU(sb, d, y + s1 * y_stride + j);
+      hn::StoreU(sa, d, y + s * y_stride + j);
+    }
+  }
+#endif
 }
 
 // tme_requant_relu (tme_kernel.h); the scalar target computes it lane by lane.
@@ -176,6 +233,7 @@ HWY_AFTER_NAMESPACE();
 namespace edrnr::chip {
 
 HWY_EXPORT(DotColumns);
+HWY_EXPORT(DotColumnsPairs);
 HWY_EXPORT(RequantRelu);
 HWY_EXPORT(RequantSigned);
 HWY_EXPORT(AddTerms);
@@ -184,6 +242,24 @@ HWY_EXPORT(TargetName);
 void tme_dot_columns(const int32_t* wt, size_t out_pad, size_t i_begin, size_t i_end, const int32_t* x, size_t x_stride,
                      size_t samples, int32_t* y, size_t y_stride) {
   HWY_DYNAMIC_DISPATCH(DotColumns)(wt, out_pad, i_begin, i_end, x, x_stride, samples, y, y_stride);
+}
+
+std::vector<int16_t> tme_pair_weights(const int32_t* wt, size_t in, size_t out_pad) {
+  std::vector<int16_t> pairs(in / 2 * out_pad * 2);
+  for (size_t p = 0; p < in / 2; ++p)
+    for (size_t j = 0; j < out_pad; ++j)
+      for (size_t h = 0; h < 2; ++h) {
+        const int32_t w = wt[(2 * p + h) * out_pad + j];
+        if (w < -128 || w > 127) throw std::invalid_argument("tme_pair_weights: a weight outside int8");
+        pairs[2 * (p * out_pad + j) + h] = int16_t(w);
+      }
+  return pairs;
+}
+
+void tme_dot_columns_pairs(const int16_t* wt_pairs, const int32_t* wt, size_t out_pad, size_t i_end, const int32_t* x,
+                           size_t x_stride, size_t samples, int32_t* y, size_t y_stride) {
+  if (i_end / 2 > kTmeMaxPairs) throw std::invalid_argument("tme_dot_columns_pairs: too many inputs");
+  HWY_DYNAMIC_DISPATCH(DotColumnsPairs)(wt_pairs, wt, out_pad, i_end, x, x_stride, samples, y, y_stride);
 }
 
 uint64_t tme_requant_relu(const int32_t* sum, size_t sum_stride, size_t samples, const int32_t* bias,

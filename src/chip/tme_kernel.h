@@ -3,6 +3,7 @@
 // Highway with runtime dispatch (the best SIMD target the CPU has).
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 namespace edrnr::chip {
 
@@ -19,6 +20,22 @@ inline constexpr size_t kTmeLanePad = 16;
 // give |sum| <= 2^30).
 void tme_dot_columns(const int32_t* wt, size_t out_pad, size_t i_begin, size_t i_end, const int32_t* x, size_t x_stride,
                      size_t samples, int32_t* y, size_t y_stride);
+
+// At most this many input pairs (512 inputs) in tme_dot_columns_pairs.
+inline constexpr size_t kTmeMaxPairs = 256;
+
+// tme_dot_columns with i_begin = 0, the products formed two at a time from
+// 16-bit halves: wt_pairs holds pair p = inputs (2p, 2p + 1) of output j at
+// [2 (p out_pad + j)] and [2 (p out_pad + j) + 1] (tme_pair_weights), wt the
+// same weights as tme_dot_columns takes (for an odd i_end's last input).
+// The same int32 results as tme_dot_columns whenever every x fits int16 and
+// every weight int8 (a pair's two products then sum to under 2^23, and the
+// lanes add in int32 as tme_dot_columns does).
+// The pair layout of tme_dot_columns_pairs for wt (in x out_pad, transposed,
+// int8 values; throws otherwise): in / 2 pairs, an odd last input left out.
+std::vector<int16_t> tme_pair_weights(const int32_t* wt, size_t in, size_t out_pad);
+void tme_dot_columns_pairs(const int16_t* wt_pairs, const int32_t* wt, size_t out_pad, size_t i_end, const int32_t* x,
+                           size_t x_stride, size_t samples, int32_t* y, size_t y_stride);
 
 // The requantization of a hidden layer whose sums are exact: for each of
 // `samples` rows and each j < out_pad,

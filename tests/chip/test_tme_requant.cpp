@@ -51,6 +51,37 @@ TEST(TmeRequantRelu, MatchesTheScalarFormulaOnEveryTarget) {
   hwy::SetSupportedTargetsForTest(0);
 }
 
+// tme_dot_columns_pairs against the sums of products of its contract,
+// formed here in 64-bit scalar arithmetic, on random int8 weights and int16
+// inputs (their extremes included), odd and even input counts, on every SIMD
+// target this build has and the CPU runs; and the pair layout refuses a
+// weight outside int8.
+TEST(TmeDotColumnsPairs, MatchesTheScalarSumsOnEveryTarget) {
+  constexpr size_t kStride = 256, kOutPad = 32, kSamples = 4, kIn = 41;
+  std::mt19937_64 rng(11);
+  std::vector<int32_t> wt(kIn * kOutPad), x(kStride * kSamples), y(kStride * kSamples);
+  for (int64_t target : hwy::SupportedAndGeneratedTargets()) {
+    hwy::SetSupportedTargetsForTest(target);
+    for (int rep = 0; rep < 60; ++rep) {
+      for (int32_t& w : wt) w = rep % 5 == 0 ? (rng() % 2 ? 127 : -128) : int32_t(rng() % 256) - 128;
+      for (int32_t& v : x) v = rep % 7 == 0 ? (rng() % 2 ? 32767 : -32768) : int32_t(rng() % 65536) - 32768;
+      const std::vector<int16_t> pairs = tme_pair_weights(wt.data(), kIn, kOutPad);
+      const size_t i_end = 1 + size_t(rep) % kIn;
+      tme_dot_columns_pairs(pairs.data(), wt.data(), kOutPad, i_end, x.data(), kStride, kSamples, y.data(), kStride);
+      for (size_t s = 0; s < kSamples; ++s)
+        for (size_t j = 0; j < kOutPad; ++j) {
+          int64_t sum = 0;
+          for (size_t i = 0; i < i_end; ++i) sum += int64_t(wt[i * kOutPad + j]) * x[s * kStride + i];
+          ASSERT_EQ(y[s * kStride + j], sum)
+              << tme_kernel_target() << " sample " << s << " output " << j << " inputs " << i_end;
+        }
+    }
+  }
+  hwy::SetSupportedTargetsForTest(0);
+  wt[3] = 128;
+  EXPECT_THROW(tme_pair_weights(wt.data(), kIn, kOutPad), std::invalid_argument);
+}
+
 // tme_requant_signed against fx::requantize (the exact 128-bit product and
 // its rounding) and fx::saturate, on random signed values, biases,
 // multipliers and shifts, with floor and half-up rounding, a row length that
