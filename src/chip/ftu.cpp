@@ -52,8 +52,13 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
   std::array<int64_t, kRaysPerPacket> known_k{};
   std::array<Vec3i, kRaysPerPacket> known_f{};
   uint8_t known = 0;
-  // Each ray's face crossings, shared by its fine-voxel and leaf exits.
-  std::array<RayMath::ExitMemo, kRaysPerPacket> crossings{};
+  // Each ray's face crossings, shared by its fine-voxel and leaf exits and
+  // kept with the ray for its next traversals while its k_end stays.
+  for (RayState& ray : rp.rays)
+    if (ray.exit_memo_limit != ray.k_end) {
+      ray.exit_memo = {};
+      ray.exit_memo_limit = ray.k_end;
+    }
   for (;;) {
     // The live rays inside the CV, and their fine voxels.
     uint8_t active = 0;
@@ -86,7 +91,7 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
         if (!(sel.selected_mask >> r & 1)) continue;
         RayState& ray = rp.rays[size_t(r)];
         ray.k = math_.cell_exit(ray.ray, ray.k, ray.k_end, sel.voxel, kMicroPerFine, &counters_.position_evals,
-                                crossings[size_t(r)], ray.k_end);
+                                ray.exit_memo, ray.k_end);
       }
       continue;
     }
@@ -105,7 +110,7 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
     for (int r = 0; r < kRaysPerPacket; ++r) {
       if (!(sel.selected_mask >> r & 1)) continue;
       RayState& ray = rp.rays[size_t(r)];
-      RayMath::ExitMemo& memo = crossings[size_t(r)];
+      RayMath::ExitMemo& memo = ray.exit_memo;
       const int64_t k_exit = math_.cell_exit(ray.ray, ray.k, ray.k_end, sel.voxel, kMicroPerFine,
                                              &counters_.position_evals, memo, ray.k_end);
       int64_t k = ray.k;

@@ -29,6 +29,10 @@ struct RayState {
   // kept by a consumer that evaluates the ray's samples in several batches.
   std::vector<int32_t> dir_input;
   uint64_t dir_input_saturations = 0;
+  // The FTU's face crossings of this ray (RayMath::ExitMemo), valid for
+  // k_limit = exit_memo_limit: kept from one fine traversal to the next.
+  RayMath::ExitMemo exit_memo;
+  int64_t exit_memo_limit = -1;
 
   // Still marching: not stopped by the VRU and not past the box.
   bool live() const { return valid && !terminated && k < k_end; }
