@@ -39,7 +39,8 @@ bool RpRob::insert(uint32_t rp, uint32_t tag) {
     ++counters_.insert_refusals;  // nothing changed since the same insert was refused
     return false;
   }
-  if (where_.count(rp)) throw std::logic_error("RP-ROB insert: RP " + std::to_string(rp) + " is already held");
+  if (rp < where_.size() && where_[rp].held)
+    throw std::logic_error("RP-ROB insert: RP " + std::to_string(rp) + " is already held");
   int chosen = -1;
   if (config_.reorder) {
     // An entry of this tag with room, the most occupied first.
@@ -68,7 +69,9 @@ bool RpRob::insert(uint32_t rp, uint32_t tag) {
   if (en.count == 0) en.tag = tag;
   ++en.count;
   en.ready.push_back({rp, tag, stamp_++});
-  where_[rp] = {chosen, tag, false};
+  if (rp >= where_.size()) where_.resize(size_t(rp) + 1);
+  where_[rp] = {chosen, tag, false, true};
+  ++held_;
   note_recent(tag);
   ++counters_.inserts;
   uint64_t used = 0;
@@ -149,10 +152,9 @@ std::optional<ScheduledRp> RpRob::schedule_scan() {
 }
 
 RpRob::Place& RpRob::in_flight_place(uint32_t rp, const char* op) {
-  auto it = where_.find(rp);
-  if (it == where_.end() || !it->second.in_flight)
+  if (rp >= where_.size() || !where_[rp].held || !where_[rp].in_flight)
     throw std::logic_error(std::string("RP-ROB ") + op + ": RP " + std::to_string(rp) + " is not in flight");
-  return it->second;
+  return where_[rp];
 }
 
 void RpRob::reschedule(uint32_t rp) {
@@ -167,7 +169,8 @@ void RpRob::retire(uint32_t rp) {
   Place& p = in_flight_place(rp, "retire");
   Entry& en = entries_[size_t(p.entry)];
   --en.count;
-  where_.erase(rp);
+  p = Place{};
+  --held_;
   ++version_;
   ++counters_.retires;
 }

@@ -43,7 +43,6 @@
 #include <deque>
 #include <optional>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 namespace edrnr::chip {
@@ -101,8 +100,8 @@ class RpRob {
   uint32_t entry_tag(int e) const { return entries_[size_t(e)].tag; }
   int entry_count(int e) const { return entries_[size_t(e)].count; }  // placeholders, ready + in flight
   int entry_ready(int e) const { return int(entries_[size_t(e)].ready.size()); }
-  size_t placeholders() const { return where_.size(); }
-  bool empty() const { return where_.empty(); }
+  size_t placeholders() const { return held_; }
+  bool empty() const { return held_ == 0; }
   std::optional<uint32_t> current_tag() const {
     return has_current_ ? std::optional<uint32_t>(current_) : std::nullopt;
   }
@@ -133,9 +132,10 @@ class RpRob {
     std::deque<Ready> ready;
   };
   struct Place {
-    int entry;
-    uint32_t tag;
-    bool in_flight;
+    int entry = 0;
+    uint32_t tag = 0;
+    bool in_flight = false;
+    bool held = false;  // the RP has a placeholder
   };
 
   void note_recent(uint32_t tag);
@@ -146,7 +146,8 @@ class RpRob {
 
   RpRobConfig config_;
   std::vector<Entry> entries_;
-  std::unordered_map<uint32_t, Place> where_;
+  std::vector<Place> where_;  // by RP pointer
+  size_t held_ = 0;           // RPs with a placeholder
   std::deque<uint32_t> recent_;
   bool has_current_ = false;
   uint32_t current_ = 0;

@@ -1,6 +1,7 @@
 #include "chip/tme.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <stdexcept>
 
@@ -166,13 +167,22 @@ std::vector<int32_t> Tme::encode_direction(const Vec3d& dir, int frequencies, co
   };
   out.reserve(3 + 6 * size_t(std::max(frequencies, 0)));
   for (int a = 0; a < 3; ++a) put(dir[a]);
-  // The sines and cosines of every frequency at once (det_sin_cos: the bits of det_sin / det_cos).
-  std::vector<double> arg, sin_v, cos_v;
+  // The sines and cosines of every frequency at once (det_sin_cos: the bits of
+  // det_sin / det_cos), on the stack for up to 16 frequencies.
+  const size_t count = 3 * size_t(std::max(frequencies, 0));
+  constexpr size_t kOnStack = 48;
+  std::array<double, 3 * kOnStack> stack;
+  std::vector<double> heap;
+  double* arg = stack.data();
+  if (count > kOnStack) {
+    heap.resize(3 * count);
+    arg = heap.data();
+  }
+  double* sin_v = arg + count;
+  double* cos_v = sin_v + count;
   for (int k = 0; k < frequencies; ++k)
-    for (int a = 0; a < 3; ++a) arg.push_back(std::ldexp(1.0, k) * dir[a]);
-  sin_v.resize(arg.size());
-  cos_v.resize(arg.size());
-  det_sin_cos(arg.data(), arg.size(), sin_v.data(), cos_v.data());
+    for (int a = 0; a < 3; ++a) arg[3 * k + a] = std::ldexp(1.0, k) * dir[a];
+  det_sin_cos(arg, count, sin_v, cos_v);
   for (int k = 0; k < frequencies; ++k) {
     for (int a = 0; a < 3; ++a) put(sin_v[size_t(3 * k + a)]);
     for (int a = 0; a < 3; ++a) put(cos_v[size_t(3 * k + a)]);
