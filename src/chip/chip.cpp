@@ -196,6 +196,29 @@ namespace {
 double ratio(uint64_t a, uint64_t b) { return b ? double(a) / double(b) : 0.0; }
 }  // namespace
 
+ChipCounters unit_counters(const ChipUnits& u) {
+  ChipCounters c;
+  c.packets = u.zorg.packet_count();
+  c.rays = u.front.counters().rays;
+  c.rays_dropped_abt = u.front.counters().rays_dropped_abt;
+  c.rays_dropped_tsps = u.front.counters().rays_dropped_tsps;
+  c.tsps_position_evals = u.front.tsps_position_evals();
+  c.zorg_skipped_quads = u.zorg.skipped_quads();
+  c.ctu = u.ctu.counters();
+  c.ftu = u.ftu.counters();
+  c.rp_rob = u.rob.counters();
+  c.ooo = u.ooo.counters();
+  c.feature_cache = u.cfiu.cache().counters();
+  c.cfiu = u.cfiu.counters();
+  c.tme = u.tme.counters();
+  c.vru = u.vru.counters();
+  c.peak_rp_buffer = uint64_t(u.buffer.peak_in_use());
+  c.feature_cache_lines = u.cfiu.cache().lines();
+  for (int b = 0; b < chip::kFeatureBanks; ++b) c.bank_depth_rows[size_t(b)] = u.cfiu.cache().layout().bank_depth(b);
+  c.mlp_bytes = u.tme.mlp_count() ? u.tme.mlp(0).stored_bytes : 0;
+  return c;
+}
+
 double ChipCounters::coarse_rays_per_iteration() const { return ratio(ctu.rays_advanced, ctu.iterations); }
 double ChipCounters::fine_rays_per_iteration() const { return ratio(ftu.rays_advanced, ftu.iterations); }
 double ChipCounters::rps_per_tag_switch() const { return ratio(rp_rob.schedules, rp_rob.tag_runs); }
@@ -484,30 +507,12 @@ class FunctionalChip {
   }
 
   void collect(ChipCounters& c) const {
-    c = ChipCounters{};
-    c.packets = zorg_.packet_count();
-    c.rays = front_.counters().rays;
-    c.rays_dropped_abt = front_.counters().rays_dropped_abt;
-    c.rays_dropped_tsps = front_.counters().rays_dropped_tsps;
+    c = unit_counters({zorg_, front_, ctu_, ftu_, rob_, ooo_, cfiu_, tme_, vru_, buffer_});
     c.packets_dropped = packets_dropped_;
-    c.tsps_position_evals = front_.tsps_position_evals();
-    c.zorg_skipped_quads = zorg_.skipped_quads();
-    c.ctu = ctu_.counters();
-    c.ftu = ftu_.counters();
-    c.rp_rob = rob_.counters();
-    c.ooo = ooo_.counters();
-    c.feature_cache = cfiu_.cache().counters();
-    c.cfiu = cfiu_.counters();
-    c.tme = tme_.counters();
-    c.vru = vru_.counters();
     c.cv_transitions = cv_transitions_;
     c.fine_reschedules = fine_reschedules_;
     c.rps_finished = rps_finished_;
     c.fill_waits = fill_waits_;
-    c.peak_rp_buffer = uint64_t(buffer_.peak_in_use());
-    c.feature_cache_lines = cfiu_.cache().lines();
-    for (int b = 0; b < kFeatureBanks; ++b) c.bank_depth_rows[size_t(b)] = cfiu_.cache().layout().bank_depth(b);
-    c.mlp_bytes = model_.mlp_count() ? tme_.mlp(0).stored_bytes : 0;
   }
 
   const SceneModel& model_;

@@ -36,12 +36,15 @@
 #include "chip/cfiu.h"
 #include "chip/ctu.h"
 #include "chip/feature_cache.h"
+#include "chip/front_end.h"
 #include "chip/ftu.h"
 #include "chip/numerics.h"
 #include "chip/oo_si.h"
+#include "chip/rp_buffer.h"
 #include "chip/rp_rob.h"
 #include "chip/tme.h"
 #include "chip/vru.h"
+#include "chip/zorg.h"
 #include "core/image.h"
 #include "core/stats.h"
 #include "data/camera.h"
@@ -129,6 +132,25 @@ struct ChipCounters {
   double feature_hit_rate() const;           // feature cache requests that hit
   double micro_grid_hit_rate() const;
 };
+
+// The units whose counters make up a ChipCounters; the functional chip and
+// the cycle simulator each keep one of every unit.
+struct ChipUnits {
+  const chip::Zorg& zorg;
+  const chip::FrontEnd& front;
+  const chip::Ctu& ctu;
+  const chip::Ftu& ftu;
+  const chip::RpRob& rob;
+  const chip::OooSi& ooo;
+  const chip::Cfiu& cfiu;
+  const chip::Tme& tme;
+  const chip::Vru& vru;
+  const chip::RpBuffer& buffer;
+};
+// The units' counters, the feature cache's geometry and the MLP size; what
+// the caller tallies itself (packets dropped, CV transitions, reschedules,
+// RPs finished, fill waits) is left zero.
+ChipCounters unit_counters(const ChipUnits& u);
 
 // Registers every counter under `prefix` ("chip.ctu.coarse_checks", ...) with
 // its unit and description, set to the values in `c`.

@@ -159,6 +159,7 @@ class Tme {
   static std::vector<int32_t> encode_direction(const Vec3d& dir, int frequencies, const ChipNumerics& numerics);
 
   const TmeMlp& mlp(size_t i) const { return mlps_[i]; }
+  size_t mlp_count() const { return mlps_.size(); }
   const ActivationLut& alpha_lut() const { return alpha_lut_; }
   const ActivationLut& sigmoid_lut() const { return sigmoid_lut_; }
   const TmeCounters& counters() const { return counters_; }

@@ -16,20 +16,6 @@ namespace {
 // With two threads, how many front-end packets the worker may build ahead.
 constexpr size_t kFrontEndAheadPackets = 64;
 
-CacheConfig cache_config(const SimCacheConfig& s, const char* name, int64_t size_bytes, uint64_t window) {
-  CacheConfig c;
-  c.name = name;
-  c.size_bytes = uint64_t(size_bytes);
-  c.line_bytes = s.line_bytes;
-  c.ways = s.ways;
-  c.replacement = s.replacement;
-  c.random_seed = s.random_seed;
-  c.mshr_entries = s.mshr_entries;
-  c.hit_latency_cycles = s.hit_latency_cycles;
-  c.hit_rate_window_cycles = window;
-  return c;
-}
-
 }  // namespace
 
 Engine::Engine(const SceneModel& model, const Camera& camera, const SimConfig& config, const SimOptions& options,
@@ -62,10 +48,10 @@ Engine::Engine(const SceneModel& model, const Camera& camera, const SimConfig& c
       map_(make_address_map(model, mlp_bytes_, config.memory.mlp_cache.line_bytes, zorg_.packet_count(),
                             config.memory.output_record_bytes, config.memory.dram.capacity_bytes())),
       mem_(config.memory.dram, config.clock_MHz, config.memory.max_request_bytes, map_, stats_),
-      micro_cache_(cache_config(config.memory.micro_grid_cache, "micro_grid", config.chip.micro_grid_cache_bytes,
-                                config.hit_rate_window_cycles)),
-      mlp_cache_(cache_config(config.memory.mlp_cache, "mlp_weights", config.chip.mlp_cache_bytes,
-                              config.hit_rate_window_cycles)),
+      micro_cache_(make_cache_config(config.memory.micro_grid_cache, "micro_grid", config.chip.micro_grid_cache_bytes,
+                                     config.hit_rate_window_cycles)),
+      mlp_cache_(make_cache_config(config.memory.mlp_cache, "mlp_weights", config.chip.mlp_cache_bytes,
+                                   config.hit_rate_window_cycles)),
       feature_series_(config.hit_rate_window_cycles),
       mlp_series_(config.hit_rate_window_cycles),
       activity_(std::vector<std::string>(kUnitNames, kUnitNames + kUnits), options.trace_start_cycle,

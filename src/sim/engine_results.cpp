@@ -22,30 +22,13 @@ void Engine::count_per_access(AccessCount& a, bool hit, size_t samples) {
 }
 
 ChipCounters Engine::chip_counters() const {
-  ChipCounters c;
-  c.packets = zorg_.packet_count();
-  c.rays = front_.counters().rays;
-  c.rays_dropped_abt = front_.counters().rays_dropped_abt;
-  c.rays_dropped_tsps = front_.counters().rays_dropped_tsps;
+  ChipCounters c =
+      unit_counters({zorg_, front_, ctu_, ftu_, rob_, ooo_, cfiu_, arithmetic_.tme(), arithmetic_.vru(), buffer_});
   c.packets_dropped = packets_dropped_;
-  c.tsps_position_evals = front_.tsps_position_evals();
-  c.zorg_skipped_quads = zorg_.skipped_quads();
-  c.ctu = ctu_.counters();
-  c.ftu = ftu_.counters();
-  c.rp_rob = rob_.counters();
-  c.ooo = ooo_.counters();
-  c.feature_cache = cfiu_.cache().counters();
-  c.cfiu = cfiu_.counters();
-  c.tme = arithmetic_.tme().counters();
-  c.vru = arithmetic_.vru().counters();
   c.cv_transitions = cv_transitions_;
   c.fine_reschedules = fine_reschedules_;
   c.rps_finished = rps_finished_;
   c.fill_waits = ooo_.counters().waits;
-  c.peak_rp_buffer = uint64_t(buffer_.peak_in_use());
-  c.feature_cache_lines = cfiu_.cache().lines();
-  for (int b = 0; b < kFeatureBanks; ++b) c.bank_depth_rows[size_t(b)] = cfiu_.cache().layout().bank_depth(b);
-  c.mlp_bytes = mlp_bytes_;
   return c;
 }
 

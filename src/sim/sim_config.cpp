@@ -233,6 +233,20 @@ void check_chip_limits(const ChipConfig& c) {
          kMaxStepMicro);
 }
 
+CacheConfig make_cache_config(const SimCacheConfig& s, const char* name, int64_t size_bytes, uint64_t window_cycles) {
+  CacheConfig c;
+  c.name = name;
+  c.size_bytes = uint64_t(size_bytes);
+  c.line_bytes = s.line_bytes;
+  c.ways = s.ways;
+  c.replacement = s.replacement;
+  c.random_seed = s.random_seed;
+  c.mshr_entries = s.mshr_entries;
+  c.hit_latency_cycles = s.hit_latency_cycles;
+  c.hit_rate_window_cycles = window_cycles;
+  return c;
+}
+
 void validate(const SimConfig& c) {
   edrnr::validate(c.chip);
   check_chip_limits(c.chip);
@@ -278,15 +292,8 @@ void validate(const SimConfig& c) {
           "({} bytes, {} ways, {} entries, {} cycles)",
           name, s.line_bytes, s.ways, s.mshr_entries, s.hit_latency_cycles, limits::kMaxCacheBytes,
           limits::kMaxCacheWays, limits::kMaxQueueEntries, limits::kMaxLatencyCycles);
-    CacheConfig cc;
-    cc.name = name;
-    cc.size_bytes = uint64_t(size_bytes);
-    cc.line_bytes = s.line_bytes;
-    cc.ways = s.ways;
-    cc.replacement = s.replacement;
-    cc.mshr_entries = s.mshr_entries;
     try {
-      validate(cc);
+      validate(make_cache_config(s, name, size_bytes, 0));
     } catch (const Error& e) {
       fail("simulator.memory.{}: {}", name, e.what());
     }

@@ -118,6 +118,11 @@ struct SimConfig {
   SramBudgetLimits sram_budget;
 };
 
+// The tag store of one of the simulator's caches: its preset section `s`,
+// named `name`, of `size_bytes`, with its hit-rate series in windows of
+// `window_cycles` (not validated here).
+CacheConfig make_cache_config(const SimCacheConfig& s, const char* name, int64_t size_bytes, uint64_t window_cycles);
+
 // Throws Error naming the field when a value is out of range, including the
 // limits of core/limits.h (clock, sizes that are allocated, latencies).
 void validate(const SimConfig& config);

@@ -15,6 +15,7 @@
 #include "chip/zorg.h"
 #include "model/procedural.h"
 #include "render/cameras.h"
+#include "sim/batch_worker.h"
 #include "sim/sim_config.h"
 #include "sim/simulator.h"
 
@@ -59,6 +60,38 @@ void expect_same_rays(const chip::RayPacket& a, const chip::RayPacket& b) {
     EXPECT_EQ(x.ray.dir, y.ray.dir);
     EXPECT_EQ(x.transmittance, y.transmittance);
   }
+}
+
+// The packets FrontEndAhead builds ahead, through a ring smaller than the
+// frame so that it wraps many times, are those the front end builds when
+// asked quad by quad in ZORG order, with the same TSPS evaluations each.
+TEST(Shortcuts, FrontEndPacketsBuiltAheadMatchThoseBuiltInOrder) {
+  const SceneModel& m = scene();
+  const SimConfig& cfg = preset();
+  const ChipNumerics& n = cfg.chip.numerics;
+  const chip::RayMath math(n.traversal_float, cfg.chip.step_micro, m.micro_res);
+  const Camera cam = orbit_camera(40, 36, 120.0, 20.0, 4.0, 50.0);
+  const chip::Vru vru(n, cfg.chip.transmittance_min, cfg.chip.background);
+  const chip::Zorg zorg(cam.width, cam.height, chip::ScanOrder::ZOrder);
+  chip::FrontEnd ahead_front(m, cam, n, math, true), front(m, cam, n, math, true);
+  FrontEndAhead ahead(zorg, ahead_front, vru, 4);
+  chip::Zorg order = zorg;
+  size_t packets = 0, traversed = 0;
+  while (!order.done()) {
+    while (!ahead.ready()) ASSERT_TRUE(ahead.produce_one());
+    const FrontEndPacket e = ahead.take();
+    const chip::PixelQuad quad = order.next();
+    const uint64_t evals = front.tsps_position_evals();
+    const chip::RayPacket p = front.build(quad, vru);
+    ASSERT_EQ(e.quad.sequence, quad.sequence);
+    EXPECT_EQ(e.tsps_position_evals, front.tsps_position_evals() - evals);
+    expect_same_rays(e.packet, p);
+    ++packets;
+    traversed += p.live_mask() != 0;
+  }
+  EXPECT_FALSE(ahead.produce_one());  // the frame is done
+  EXPECT_EQ(packets, size_t(zorg.packet_count()));
+  EXPECT_GT(traversed, 0u);
 }
 
 TEST(Shortcuts, EveryStatisticTraceAndImageMatchSteppingEveryCycle) {
