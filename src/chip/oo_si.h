@@ -61,6 +61,9 @@ class OooSi {
   bool out_of_order_;
   std::vector<LsEntry> queue_;
   OooCounters counters_;
+  // The last select() found nothing, at these fill and push counts.
+  bool waiting_ = false;
+  uint64_t waited_fills_ = 0, waited_pushes_ = 0;
 };
 
 // SCC output for one sample.
