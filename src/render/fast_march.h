@@ -3,13 +3,16 @@
 // (render/traversal.h: the same candidates k, the same float points p_k, the
 // same range of k inside the widened object AABB), found with less work.
 //
-//   - Empty fine voxels are skipped a cube at a time: FastSkipGrid holds, per
-//     fine voxel, its Chebyshev distance (in fine voxels, capped) to the
-//     nearest occupied one, so a ray at an empty fine voxel at distance r >= 3
-//     jumps past the cube of (2r - 1)^3 fine voxels around it, all empty. This
-//     stands in for the coarse and fine tiers (a coarse cell is empty iff its
-//     fine voxels are), with fewer steps through large empty regions.
-//   - From a candidate at distance 2 or less on, a SIMD vector of consecutive
+//   - Empty space is skipped a box at a time: FastSkipGrid holds, per fine
+//     voxel, its reach e: how many micro voxels its box can be widened by on
+//     every side and stay empty (far from the object e = 4 (r - 1) for the
+//     Chebyshev distance r in fine voxels, capped; near it the exact micro
+//     gap), so a ray at an empty fine voxel jumps past that box. This stands
+//     in for the coarse and fine tiers (a coarse cell is empty iff its fine
+//     voxels are), with few steps through large empty regions, and jumps a
+//     few micro voxels past the empty fine voxels next to the object.
+//   - From a candidate in a fine voxel with reach 0 (occupied, or touching
+//     an occupied micro voxel) on, a SIMD vector of consecutive
 //     candidates (16 with AVX-512) is tested at once: points, micro voxels
 //     and one gather from 64-bit masks of the fine voxels' 4x4x4 micro voxels
 //     (the leaf and micro tiers in one bit), with no branch per candidate.
@@ -45,6 +48,12 @@ struct FastSkipGrid {
   // voxel (lx, ly, lz) of it is occupied (the 64-bit mask of its 4x4x4 micro
   // voxels, low half first).
   std::vector<uint32_t> fine_words;
+  // Per fine voxel: 0 if occupied; else e, in micro voxels, such that the
+  // box of the fine voxel's 4x4x4 micro voxels widened by e on every side
+  // holds no occupied micro voxel (per fine_words): the Chebyshev gap to the
+  // nearest one, capped at 4 r for fine voxels at distance r <= 2, and
+  // 4 (r - 1) beyond. Padded like `distance`.
+  std::vector<uint8_t> reach;
 
   // Built from the fine and micro tiers of a model (check_structure()d).
   explicit FastSkipGrid(const SceneModel& model);
@@ -132,6 +141,13 @@ class FastMarcher {
   State st_;
 };
 
+// Fine voxels whose reach (FastSkipGrid::reach) is at least this many micro
+// voxels are jumped past (the fine voxel widened by its reach); from the
+// others on (occupied fine voxels, and empty ones touching an occupied micro
+// voxel) the candidates are tested a vector at a time. Thresholds 2, 4 and 8
+// (8: the fine-voxel cubes only) were slower on lego.
+inline constexpr int kFastJumpReach = 1;
+
 // The most marchers fast_march_group advances together.
 inline constexpr int kFastMarchGroup = 4;
 
@@ -151,9 +167,9 @@ void fast_march_group(FastMarcher* const* marchers, int n, int limit, MarchSampl
 // bit, with the per-ray divisions and square roots in SIMD lanes (rays with a
 // zero or tiny direction component, or candidate indices from 2^51 on, take
 // set_up itself), and then advanced in the lanes through the empty space in
-// front of the object: the march's jumps from fine voxels at distance 3 or
-// more (and its single steps past candidates outside the grid) are made
-// there until a candidate at distance 2 or less, exactly as the march would
+// front of the object: the march's jumps from fine voxels with a reach of
+// kFastJumpReach or more (and its single steps past candidates outside the
+// grid) are made there until a candidate with a shorter reach, exactly as the march would
 // make them (the same candidates, the same occupancy_checks count); the
 // vector test from that candidate is left to the march (marked dense: it
 // makes no second lookup). Also writes the unit

@@ -30,7 +30,7 @@ constexpr int64_t kVectorKLimit = int64_t(1) << 30;
 // What the march reads of the model, the same for all marchers of a render.
 struct Grid {
   const uint32_t* words;  // FastSkipGrid::fine_words
-  const uint8_t* distance;
+  const uint8_t* reach;   // FastSkipGrid::reach
   const int32_t* fine_to_block;
   int micro_res, fine_res;
   float hi;  // micro_res as a float: the largest coordinate inside the grid
@@ -162,10 +162,11 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
   return bits;
 }
 
-// Fine voxels at this distance or nearer to an occupied one are not jumped
-// past: the candidates from there on are tested a vector at a time (a jump
-// from them would pass a fine voxel or two, about as many candidates).
-constexpr int kChunkBelow = 2;
+// The box skip_box jumps from micro voxel v, whose fine voxel has reach e:
+// the fine voxel's micro voxels widened by e.
+HWY_INLINE Vec3i ReachLo(const Vec3i& v, int e) {
+  return Vec3i{4 * (v.x >> 2) - e, 4 * (v.y >> 2) - e, 4 * (v.z >> 2) - e};
+}
 
 // Hands out up to `room` of a marcher's pending samples, in order; returns
 // how many.
@@ -213,10 +214,9 @@ HWY_INLINE bool Advance(FastMarcher::State& st, const Grid& g) {
     return true;
   }
   ++st.checks;
-  const int r = g.distance[FineIndex(v, g.fine_res)];
-  if (r > kChunkBelow) {  // the cube of fine voxels within r - 1 is empty
-    const Vec3i lo{4 * ((v.x >> 2) - r + 1), 4 * ((v.y >> 2) - r + 1), 4 * ((v.z >> 2) - r + 1)};
-    st.k = st.skip_box(k, lo, 4 * (2 * r - 1));
+  const int e = g.reach[FineIndex(v, g.fine_res)];
+  if (e >= kFastJumpReach) {  // the fine voxel widened by e micro voxels is empty
+    st.k = st.skip_box(k, ReachLo(v, e), 4 + 2 * e);
     return true;
   }
   TestChunk(st, g);
@@ -229,7 +229,7 @@ void MarchGroup(FastMarcher* const* marchers, int n, int limit, MarchSample* sam
   const FastMarcher::State& s0 = marchers[0]->state();
   Grid g;
   g.words = s0.skip->fine_words.data();
-  g.distance = s0.skip->distance.data();
+  g.reach = s0.skip->reach.data();
   g.fine_to_block = s0.model->fine_to_block.data();
   g.micro_res = s0.model->micro_res;
   g.fine_res = s0.skip->res;
@@ -277,7 +277,7 @@ HWY_INLINE V StdMin(V a, V b) {
 }
 
 // What SetupRays does in lanes after the set-up, for one marcher: the
-// march's steps (Advance) up to a candidate at distance kChunkBelow or less,
+// march's steps (Advance) up to a candidate whose reach is below kFastJumpReach,
 // whose vector test is then left to the march without a second lookup
 // (dense).
 void Approach(FastMarcher::State& st, const Grid& g) {
@@ -287,14 +287,13 @@ void Approach(FastMarcher::State& st, const Grid& g) {
       ++st.k;
       continue;
     }
-    const int r = g.distance[FineIndex(v, g.fine_res)];
+    const int e = g.reach[FineIndex(v, g.fine_res)];
     ++st.checks;
-    if (r <= kChunkBelow) {
+    if (e < kFastJumpReach) {
       st.dense = true;
       return;
     }
-    const Vec3i lo{4 * ((v.x >> 2) - r + 1), 4 * ((v.y >> 2) - r + 1), 4 * ((v.z >> 2) - r + 1)};
-    st.k = st.skip_box(st.k, lo, 4 * (2 * r - 1));
+    st.k = st.skip_box(st.k, ReachLo(v, e), 4 + 2 * e);
   }
 }
 
@@ -314,11 +313,11 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
   const hn::Rebind<int32_t, DD> di32;
   using VF = hn::Vec<decltype(dfh)>;
   using VI = hn::Vec<decltype(di32)>;
-  const int32_t* distance = reinterpret_cast<const int32_t*>(skip.distance.data());  // 32-bit reads at byte offsets
+  const int32_t* reach = reinterpret_cast<const int32_t*>(skip.reach.data());  // 32-bit reads at byte offsets
   const float grid_hi = float(model.micro_res);
   Grid grid;
   grid.words = skip.fine_words.data();
-  grid.distance = skip.distance.data();
+  grid.reach = skip.reach.data();
   grid.fine_to_block = model.fine_to_block.data();
   grid.micro_res = model.micro_res;
   grid.fine_res = skip.res;
@@ -415,12 +414,12 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
       hn::Store(sc_v[a], dd, scale[a]);
       hn::Store(of_v[a], dd, offset[a]);
     }
-    // The march's first steps, in the lanes (Advance): from an empty fine
-    // voxel at distance r >= 3 a jump past the empty cube around it
+    // The march's first steps, in the lanes (Advance): from a fine voxel
+    // whose reach is kFastJumpReach or more a jump past the empty box around it
     // (FastMarcher::State::skip_box), past a candidate outside the grid one
-    // step, until a candidate at distance 2 or less or the end. That
+    // step, until a candidate with a shorter reach or the end. That
     // candidate's vector test is left to the march, marked dense so that it
-    // does not look the distance up again.
+    // does not look the reach up again.
     VD kv = k, checks = zero;
     auto dense = hn::FirstN(dd, 0);
     // Whether the march has candidates, before the steps (the AABB count's condition).
@@ -440,13 +439,13 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
       const VI fr = hn::Set(di32, skip.res);
       const VI fine = hn::Add(hn::ShiftRight<2>(vox[0]),
                               hn::Mul(fr, hn::Add(hn::ShiftRight<2>(vox[1]), hn::Mul(fr, hn::ShiftRight<2>(vox[2])))));
-      const VI r = hn::And(hn::GatherOffset(di32, distance, hn::IfThenElseZero(inside_i, fine)), hn::Set(di32, 0xFF));
-      const auto far_i = hn::And(inside_i, hn::Gt(r, hn::Set(di32, kChunkBelow)));
-      // skip_box(k, lo, size): lo = 4 (fine - r + 1) per axis, size = 4 (2 r - 1).
-      const VD size_d = hn::PromoteTo(dd, hn::ShiftLeft<2>(hn::Sub(hn::Add(r, r), hn::Set(di32, 1))));
+      const VI e = hn::And(hn::GatherOffset(di32, reach, hn::IfThenElseZero(inside_i, fine)), hn::Set(di32, 0xFF));
+      const auto far_i = hn::And(inside_i, hn::Gt(e, hn::Set(di32, kFastJumpReach - 1)));
+      // skip_box(k, lo, size): lo = 4 (v >> 2) - e per axis, size = 4 + 2 e.
+      const VD size_d = hn::PromoteTo(dd, hn::Add(hn::Add(e, e), hn::Set(di32, 4)));
       VD xs[3];
       for (int a = 0; a < 3; ++a) {
-        const VI lo = hn::ShiftLeft<2>(hn::Add(hn::Sub(hn::ShiftRight<2>(vox[a]), r), hn::Set(di32, 1)));
+        const VI lo = hn::Sub(hn::ShiftLeft<2>(hn::ShiftRight<2>(vox[a])), e);
         xs[a] = hn::Add(hn::Mul(hn::Add(hn::PromoteTo(dd, lo), hn::Mul(size_d, ex_v[a])), sc_v[a]), of_v[a]);
       }
       const VD xm = StdMin(xs[0], StdMin(xs[1], xs[2]));

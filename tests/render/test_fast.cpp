@@ -102,11 +102,11 @@ TEST(Fast, MarchYieldsTheReferenceSamples) {
 }
 
 // The march's first steps as fast_setup_rays is to make them, written out
-// from the march's rules: from a candidate in an empty fine voxel at
-// distance r >= 3, a jump past the empty cube of fine voxels around it;
-// past a candidate outside the grid, one step; up to a candidate at
-// distance 2 or less (whose vector test is next: dense), or the end. Each
-// distance lookup is an occupancy check.
+// from the march's rules: from a candidate in a fine voxel whose reach e is
+// kFastJumpReach or more, a jump past the empty box of the fine voxel
+// widened by e micro voxels; past a candidate outside the grid, one step;
+// up to a candidate with a shorter reach (whose vector test is next:
+// dense), or the end. Each reach lookup is an occupancy check.
 void approach(FastMarcher::State& st, const SceneModel& m, const FastSkipGrid& skip) {
   const float hi = float(m.micro_res);
   while (st.k <= st.k_end) {
@@ -117,13 +117,13 @@ void approach(FastMarcher::State& st, const SceneModel& m, const FastSkipGrid& s
     }
     const Vec3i f{std::min(int(p.x), m.micro_res - 1) / 4, std::min(int(p.y), m.micro_res - 1) / 4,
                   std::min(int(p.z), m.micro_res - 1) / 4};
-    const int r = skip.at(f.x, f.y, f.z);
+    const int e = skip.reach[size_t(f.x) + size_t(skip.res) * (size_t(f.y) + size_t(skip.res) * size_t(f.z))];
     ++st.checks;
-    if (r <= 2) {
+    if (e < kFastJumpReach) {
       st.dense = true;
       return;
     }
-    st.k = st.skip_box(st.k, Vec3i{4 * (f.x - r + 1), 4 * (f.y - r + 1), 4 * (f.z - r + 1)}, 4 * (2 * r - 1));
+    st.k = st.skip_box(st.k, Vec3i{4 * f.x - e, 4 * f.y - e, 4 * f.z - e}, 4 + 2 * e);
   }
 }
 
@@ -460,6 +460,47 @@ TEST(Fast, BadInputIsRefused) {
   SceneModel unfinalized = m;
   unfinalized.coarse_to_mlp.clear();
   EXPECT_THROW(FastRenderer(unfinalized, ModelForm::Auto, FastPath::Auto), Error);
+}
+
+// The reach of every fine voxel against a brute-force search of the micro
+// bitmap: 0 for occupied fine voxels; else the Chebyshev gap from the fine
+// voxel's micro voxels to the nearest occupied micro voxel, capped at 4 r
+// (r: the fine distance) for r <= 2 and taken as 4 (r - 1) beyond. Between
+// the caps the gap is exact, so the box widened by it touches an occupied
+// micro voxel.
+TEST(Fast, SkipGridReachIsTheMicroGap) {
+  const SceneModel m = several_model(64, false);
+  const FastSkipGrid g(m);
+  const Bitmap3& micro = m.occupancy[int(Tier::Micro)];
+  std::vector<Vec3i> occupied;
+  for (int z = 0; z < m.micro_res; ++z)
+    for (int y = 0; y < m.micro_res; ++y)
+      for (int x = 0; x < m.micro_res; ++x)
+        if (micro.get(x, y, z)) occupied.push_back(Vec3i{x, y, z});
+  ASSERT_GT(occupied.size(), 100u);
+  const int res = g.res;
+  ASSERT_EQ(g.reach.size(), size_t(res) * res * res + 3);
+  int fractional = 0;  // near voxels whose reach is not a multiple of 4
+  for (int fz = 0; fz < res; ++fz)
+    for (int fy = 0; fy < res; ++fy)
+      for (int fx = 0; fx < res; ++fx) {
+        const size_t f = size_t(fx) + size_t(res) * (size_t(fy) + size_t(res) * size_t(fz));
+        const int r = g.at(fx, fy, fz);
+        const int e = g.reach[f];
+        if (r == 0) {
+          ASSERT_EQ(e, 0) << fx << "," << fy << "," << fz;
+          continue;
+        }
+        // The gap along an axis from micro coordinate u to [4 f, 4 f + 4).
+        const auto gap = [](int u, int fc) { return u < 4 * fc ? 4 * fc - 1 - u : std::max(0, u - 4 * fc - 4); };
+        int best = 1 << 20;
+        for (const Vec3i& u : occupied) best = std::min(best, std::max({gap(u.x, fx), gap(u.y, fy), gap(u.z, fz)}));
+        const int want = r <= 2 ? std::min(best, 4 * r) : 4 * (r - 1);
+        ASSERT_EQ(e, want) << fx << "," << fy << "," << fz << " r " << r;
+        ASSERT_LE(e, best);  // the widened box is empty
+        fractional += r <= 2 && e % 4 != 0;
+      }
+  EXPECT_GT(fractional, 10);
 }
 
 }  // namespace
