@@ -103,7 +103,7 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
         fine_words[2 * f + 1] = uint32_t(m >> 32);
       }
 
-  // The micro gaps. Near the object (r <= 2) only the shell of fine voxels
+  // The micro gaps. Near the object (r <= kExactReach) only the shell of fine voxels
   // at distance r can hold the nearest occupied micro voxel below 4 r (those
   // nearer are empty, those farther are 4 r or more away); along an axis
   // where the shell voxel is r away its micro voxel l is 4 (r - 1) + l (or
@@ -132,7 +132,7 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
         const size_t f = size_t(fx) + R * (size_t(fy) + R * size_t(fz));
         const int r = distance[f];
         if (r == 0) continue;
-        if (r > 2) {
+        if (r > kExactReach) {
           reach[f] = uint8_t(4 * (r - 1));
           continue;
         }

@@ -38,6 +38,7 @@ namespace edrnr {
 // the micro occupancy of every fine voxel as a 64-bit mask.
 struct FastSkipGrid {
   static constexpr int kMaxDistance = 15;  // cap, fine voxels
+  static constexpr int kExactReach = 2;    // distance up to which reach is the exact micro gap (capped)
   int res = 0;                             // fine resolution
   Box3d region;  // scene units: the object AABB's micro voxels widened by one, where candidates are considered
   // Per fine voxel: 0: occupied; r: every fine voxel within r - 1 is empty.
@@ -51,8 +52,9 @@ struct FastSkipGrid {
   // Per fine voxel: 0 if occupied; else e, in micro voxels, such that the
   // box of the fine voxel's 4x4x4 micro voxels widened by e on every side
   // holds no occupied micro voxel (per fine_words): the Chebyshev gap to the
-  // nearest one, capped at 4 r for fine voxels at distance r <= 2, and
-  // 4 (r - 1) beyond. Padded like `distance`.
+  // nearest one, capped at 4 r for fine voxels at distance r <= kExactReach,
+  // and 4 (r - 1) beyond (exact gaps up to r = 3 saved 0.3 % of the lookups
+  // on lego). Padded like `distance`.
   std::vector<uint8_t> reach;
 
   // Built from the fine and micro tiers of a model (check_structure()d).

@@ -465,7 +465,7 @@ TEST(Fast, BadInputIsRefused) {
 // The reach of every fine voxel against a brute-force search of the micro
 // bitmap: 0 for occupied fine voxels; else the Chebyshev gap from the fine
 // voxel's micro voxels to the nearest occupied micro voxel, capped at 4 r
-// (r: the fine distance) for r <= 2 and taken as 4 (r - 1) beyond. Between
+// (r: the fine distance) for r <= kExactReach and taken as 4 (r - 1) beyond. Between
 // the caps the gap is exact, so the box widened by it touches an occupied
 // micro voxel.
 TEST(Fast, SkipGridReachIsTheMicroGap) {
@@ -495,10 +495,10 @@ TEST(Fast, SkipGridReachIsTheMicroGap) {
         const auto gap = [](int u, int fc) { return u < 4 * fc ? 4 * fc - 1 - u : std::max(0, u - 4 * fc - 4); };
         int best = 1 << 20;
         for (const Vec3i& u : occupied) best = std::min(best, std::max({gap(u.x, fx), gap(u.y, fy), gap(u.z, fz)}));
-        const int want = r <= 2 ? std::min(best, 4 * r) : 4 * (r - 1);
+        const int want = r <= FastSkipGrid::kExactReach ? std::min(best, 4 * r) : 4 * (r - 1);
         ASSERT_EQ(e, want) << fx << "," << fy << "," << fz << " r " << r;
         ASSERT_LE(e, best);  // the widened box is empty
-        fractional += r <= 2 && e % 4 != 0;
+        fractional += r <= FastSkipGrid::kExactReach && e % 4 != 0;
       }
   EXPECT_GT(fractional, 10);
 }
