@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <random>
 
 #include "core/error.h"
 #include "core/metrics.h"
@@ -98,6 +99,54 @@ TEST(Fast, MarchYieldsTheReferenceSamples) {
       }
       EXPECT_GT(total, 200u) << res << " " << step;
     }
+  }
+}
+
+// Many small solids, a micro voxel or a few across (spheres, thin plates,
+// thin rods) at pseudo-random places: the micro gaps around them vary in every
+// direction, as on trained scenes with fine detail.
+SceneModel dust_model(int res) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  const float micro = 3.f / float(res);  // micro voxel edge: the default scene box is 3 units wide
+  std::vector<Shape> shapes;
+  for (int i = 0; i < 60; ++i) {
+    Shape s;
+    s.center = Vec3f{u(rng), u(rng), u(rng)};
+    s.sigma = 50.f;
+    s.color = Vec3f{0.5f + 0.4f * u(rng), 0.5f, 0.5f};
+    if (i % 3 == 0) {
+      s.kind = ShapeKind::Sphere;
+      s.radius = micro * (0.6f + 0.8f * (u(rng) + 1.f));
+    } else {
+      s.kind = ShapeKind::Box;
+      const int thin = i % 3;  // plates (1) and rods (2)
+      for (int a = 0; a < 3; ++a) s.half_size[a] = micro * (a < thin ? 0.4f : 3.f + 2.f * u(rng));
+    }
+    shapes.push_back(s);
+  }
+  ProceduralOptions o;
+  o.micro_res = res;
+  return make_procedural_model("dust", shapes, o);
+}
+
+// The jumps by micro gaps (FastSkipGrid::reach) near the surfaces skip no
+// sample: every pixel ray of larger images of small solids, at two steps,
+// yields the reference march's samples.
+TEST(Fast, MarchNearSmallSolidsYieldsTheReferenceSamples) {
+  const SceneModel m = dust_model(128);
+  ASSERT_NEAR(m.scene_box.size().x, 3.f, 1e-6f);
+  const FastSkipGrid skip(m);
+  for (float step : {1.f, 0.43f}) {
+    const float delta = sample_spacing(m, step);
+    size_t total = 0;
+    int64_t k_max = 0;
+    for (const Camera& cam : views(61, 47)) {
+      SCOPED_TRACE(testing::Message() << "step " << step);
+      expect_reference_samples(m, skip, cam, delta, &total, &k_max);
+      if (HasFatalFailure()) return;
+    }
+    EXPECT_GT(total, 2000u) << step;
   }
 }
 
@@ -465,42 +514,43 @@ TEST(Fast, BadInputIsRefused) {
 // The reach of every fine voxel against a brute-force search of the micro
 // bitmap: 0 for occupied fine voxels; else the Chebyshev gap from the fine
 // voxel's micro voxels to the nearest occupied micro voxel, capped at 4 r
-// (r: the fine distance) for r <= kExactReach and taken as 4 (r - 1) beyond. Between
-// the caps the gap is exact, so the box widened by it touches an occupied
-// micro voxel.
+// (r: the fine distance) for r <= kExactReach and taken as 4 (r - 1)
+// beyond. Below the caps the gap is exact, so the box widened by it touches
+// an occupied micro voxel. The several scene and small solids.
 TEST(Fast, SkipGridReachIsTheMicroGap) {
-  const SceneModel m = several_model(64, false);
-  const FastSkipGrid g(m);
-  const Bitmap3& micro = m.occupancy[int(Tier::Micro)];
-  std::vector<Vec3i> occupied;
-  for (int z = 0; z < m.micro_res; ++z)
-    for (int y = 0; y < m.micro_res; ++y)
-      for (int x = 0; x < m.micro_res; ++x)
-        if (micro.get(x, y, z)) occupied.push_back(Vec3i{x, y, z});
-  ASSERT_GT(occupied.size(), 100u);
-  const int res = g.res;
-  ASSERT_EQ(g.reach.size(), size_t(res) * res * res + 3);
-  int fractional = 0;  // near voxels whose reach is not a multiple of 4
-  for (int fz = 0; fz < res; ++fz)
-    for (int fy = 0; fy < res; ++fy)
-      for (int fx = 0; fx < res; ++fx) {
-        const size_t f = size_t(fx) + size_t(res) * (size_t(fy) + size_t(res) * size_t(fz));
-        const int r = g.at(fx, fy, fz);
-        const int e = g.reach[f];
-        if (r == 0) {
-          ASSERT_EQ(e, 0) << fx << "," << fy << "," << fz;
-          continue;
+  for (const SceneModel& m : {several_model(64, false), dust_model(64)}) {
+    const FastSkipGrid g(m);
+    const Bitmap3& micro = m.occupancy[int(Tier::Micro)];
+    std::vector<Vec3i> occupied;
+    for (int z = 0; z < m.micro_res; ++z)
+      for (int y = 0; y < m.micro_res; ++y)
+        for (int x = 0; x < m.micro_res; ++x)
+          if (micro.get(x, y, z)) occupied.push_back(Vec3i{x, y, z});
+    ASSERT_GT(occupied.size(), 100u);
+    const int res = g.res;
+    ASSERT_EQ(g.reach.size(), size_t(res) * res * res + 3);
+    int fractional = 0;  // near voxels whose reach is not a multiple of 4
+    for (int fz = 0; fz < res; ++fz)
+      for (int fy = 0; fy < res; ++fy)
+        for (int fx = 0; fx < res; ++fx) {
+          const size_t f = size_t(fx) + size_t(res) * (size_t(fy) + size_t(res) * size_t(fz));
+          const int r = g.at(fx, fy, fz);
+          const int e = g.reach[f];
+          if (r == 0) {
+            ASSERT_EQ(e, 0) << fx << "," << fy << "," << fz;
+            continue;
+          }
+          // The gap along an axis from micro coordinate u to [4 f, 4 f + 4).
+          const auto gap = [](int u, int fc) { return u < 4 * fc ? 4 * fc - 1 - u : std::max(0, u - 4 * fc - 4); };
+          int best = 1 << 20;
+          for (const Vec3i& u : occupied) best = std::min(best, std::max({gap(u.x, fx), gap(u.y, fy), gap(u.z, fz)}));
+          const int want = r <= FastSkipGrid::kExactReach ? std::min(best, 4 * r) : 4 * (r - 1);
+          ASSERT_EQ(e, want) << fx << "," << fy << "," << fz << " r " << r;
+          ASSERT_LE(e, best);  // the widened box is empty
+          fractional += r <= FastSkipGrid::kExactReach && e % 4 != 0;
         }
-        // The gap along an axis from micro coordinate u to [4 f, 4 f + 4).
-        const auto gap = [](int u, int fc) { return u < 4 * fc ? 4 * fc - 1 - u : std::max(0, u - 4 * fc - 4); };
-        int best = 1 << 20;
-        for (const Vec3i& u : occupied) best = std::min(best, std::max({gap(u.x, fx), gap(u.y, fy), gap(u.z, fz)}));
-        const int want = r <= FastSkipGrid::kExactReach ? std::min(best, 4 * r) : 4 * (r - 1);
-        ASSERT_EQ(e, want) << fx << "," << fy << "," << fz << " r " << r;
-        ASSERT_LE(e, best);  // the widened box is empty
-        fractional += r <= FastSkipGrid::kExactReach && e % 4 != 0;
-      }
-  EXPECT_GT(fractional, 10);
+    EXPECT_GT(fractional, 10);
+  }
 }
 
 }  // namespace
