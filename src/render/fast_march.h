@@ -30,6 +30,7 @@
 
 #include "data/camera.h"
 #include "model/scene_model.h"
+#include "render/fast_kernels.h"
 #include "render/traversal.h"
 
 namespace edrnr {
@@ -104,14 +105,19 @@ class FastMarcher {
     int32_t block = -1;
     uint64_t checks = 0;
     // The last chunk's samples in order, as the vector test found them: the
-    // candidate's lane (k - chunk_k), point, micro voxel and fine voxel
-    // index; entries [found_next, found_next + popcount(pending)) are pending.
+    // candidate's lane (k - chunk_k), its point's position in its micro
+    // voxel (p - v per axis: exact, so v + f is p), the micro voxel, the fine
+    // voxel index, the micro voxel's block vertex (lx + 5 (ly + 5 lz)) and
+    // the coarse voxel index; entries [found_next, found_next +
+    // popcount(pending)) are pending.
     static constexpr int kMaxChunk = 16;
     int found_next = 0;
     alignas(64) int32_t found_lane[kMaxChunk];
-    alignas(64) float found_p[3][kMaxChunk];
+    alignas(64) float found_f[3][kMaxChunk];
     alignas(64) int32_t found_v[3][kMaxChunk];
     alignas(64) int32_t found_fine[kMaxChunk];
+    alignas(64) int32_t found_vertex[kMaxChunk];
+    alignas(64) int32_t found_coarse[kMaxChunk];
 
     // A candidate after k (whose point lies in the box of `size` micro
     // voxels from micro voxel `lo`) such that every candidate between them
@@ -162,6 +168,17 @@ inline constexpr int kFastMarchGroup = 4;
 // vector of consecutive candidates is tested against the micro masks at once.
 void fast_march_group(FastMarcher* const* marchers, int n, int limit, MarchSample* samples, int32_t* blocks,
                       int* counts, bool* ended);
+
+// fast_march_group with the samples written as the renderer's records
+// (FastSample, render/fast_kernels.h): ray rays[i], the MLP of the coarse
+// voxel (model.coarse_to_mlp), block * 125 + the micro voxel's block vertex
+// (model.fine_to_block), and the point's position in the micro voxel. Up to
+// `limit` samples of marcher i are handed out; records[i * limit + j], j <
+// counts[i], are those whose coarse voxel has an MLP and whose fine voxel
+// has a block (the others, which a valid model does not have, are added to
+// *missing).
+void fast_march_records(FastMarcher* const* marchers, const uint32_t* rays, int n, int limit, FastSample* records,
+                        int* counts, bool* ended, uint64_t* missing);
 
 // The marchers of n rays of a tile: ray r < n through the centre of pixel
 // (x0 + r % tw, y0 + r / tw). marchers[r] ends up as set_up(model, skip,

@@ -23,6 +23,9 @@ using DF = hn::CappedTag<float, FastMarcher::State::kMaxChunk>;  // at most 16 c
 using DI = hn::RebindToSigned<DF>;
 using DU = hn::RebindToUnsigned<DF>;
 
+// Micro voxels per coarse voxel edge.
+constexpr int kCvMicro = kMicroPerFine * kFinePerCoarse;
+
 // Chunks start below this candidate index: k + lane fits int32 lanes, and
 // float(k) of an int32 equals float(k) of the int64 (both round to nearest).
 constexpr int64_t kVectorKLimit = int64_t(1) << 30;
@@ -32,7 +35,8 @@ struct Grid {
   const uint32_t* words;  // FastSkipGrid::fine_words
   const uint8_t* reach;   // FastSkipGrid::reach
   const int32_t* fine_to_block;
-  int micro_res, fine_res;
+  const int32_t* coarse_to_mlp;
+  int micro_res, fine_res, coarse_res;
   float hi;  // micro_res as a float: the largest coordinate inside the grid
 };
 
@@ -76,13 +80,15 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
       if (VoxelOf(p, g, v) && Occupied(v, g)) {
         bits |= uint32_t(1) << i;
         st.found_lane[n] = i;
-        st.found_p[0][n] = p.x;
-        st.found_p[1][n] = p.y;
-        st.found_p[2][n] = p.z;
+        st.found_f[0][n] = p.x - float(v.x);
+        st.found_f[1][n] = p.y - float(v.y);
+        st.found_f[2][n] = p.z - float(v.z);
         st.found_v[0][n] = v.x;
         st.found_v[1][n] = v.y;
         st.found_v[2][n] = v.z;
         st.found_fine[n] = int32_t(FineIndex(v, g.fine_res));
+        st.found_vertex[n] = (v.x & 3) + kBlockVertsPerAxis * ((v.y & 3) + kBlockVertsPerAxis * (v.z & 3));
+        st.found_coarse[n] = int32_t(linear_index(v.x / kCvMicro, v.y / kCvMicro, v.z / kCvMicro, g.coarse_res));
         ++n;
       }
     }
@@ -118,44 +124,62 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
   hn::StoreMaskBits(du, samples, bytes);
   uint32_t bits;
   std::memcpy(&bits, bytes, sizeof(bits));
+  if (bits == 0) return bits;
+  // What the renderer's records take: the position in the micro voxel (the
+  // scalar p - float(v)), the block vertex and the coarse voxel.
+  const auto fx = hn::Sub(px, hn::ConvertTo(df, vx));
+  const auto fy = hn::Sub(py, hn::ConvertTo(df, vy));
+  const auto fz = hn::Sub(pz, hn::ConvertTo(df, vz));
+  const auto five = hn::Set(di, kBlockVertsPerAxis);
+  const auto vertex =
+      hn::Add(hn::And(vx, three), hn::Mul(five, hn::Add(hn::And(vy, three), hn::Mul(five, hn::And(vz, three)))));
+  static_assert(kCvMicro == 32, "coarse voxels of 32 micro voxels");
+  const auto cr = hn::Set(di, g.coarse_res);
+  const auto coarse =
+      hn::Add(hn::ShiftRight<5>(vx), hn::Mul(cr, hn::Add(hn::ShiftRight<5>(vy), hn::Mul(cr, hn::ShiftRight<5>(vz)))));
   // The samples' lanes packed to the front, in order: one compress per
   // vector where AVX-512 has it as an instruction, lane by lane elsewhere
   // (other targets emulate it at far greater cost).
-  if (bits == 0) return bits;
 #if HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
   {
     const auto m = hn::RebindMask(di, samples);
     const auto mf = hn::RebindMask(df, samples);
     hn::StoreU(hn::Compress(lane, m), di, st.found_lane);
-    hn::StoreU(hn::Compress(px, mf), df, st.found_p[0]);
-    hn::StoreU(hn::Compress(py, mf), df, st.found_p[1]);
-    hn::StoreU(hn::Compress(pz, mf), df, st.found_p[2]);
+    hn::StoreU(hn::Compress(fx, mf), df, st.found_f[0]);
+    hn::StoreU(hn::Compress(fy, mf), df, st.found_f[1]);
+    hn::StoreU(hn::Compress(fz, mf), df, st.found_f[2]);
     hn::StoreU(hn::Compress(vx, m), di, st.found_v[0]);
     hn::StoreU(hn::Compress(vy, m), di, st.found_v[1]);
     hn::StoreU(hn::Compress(vz, m), di, st.found_v[2]);
     hn::StoreU(hn::Compress(fine, m), di, st.found_fine);
+    hn::StoreU(hn::Compress(vertex, m), di, st.found_vertex);
+    hn::StoreU(hn::Compress(coarse, m), di, st.found_coarse);
   }
 #else
   {
     constexpr int kM = FastMarcher::State::kMaxChunk;
-    alignas(64) float lp[3][kM];
-    alignas(64) int32_t lv[4][kM];
-    hn::Store(px, df, lp[0]);
-    hn::Store(py, df, lp[1]);
-    hn::Store(pz, df, lp[2]);
+    alignas(64) float lf[3][kM];
+    alignas(64) int32_t lv[6][kM];
+    hn::Store(fx, df, lf[0]);
+    hn::Store(fy, df, lf[1]);
+    hn::Store(fz, df, lf[2]);
     hn::Store(vx, di, lv[0]);
     hn::Store(vy, di, lv[1]);
     hn::Store(vz, di, lv[2]);
     hn::Store(fine, di, lv[3]);
+    hn::Store(vertex, di, lv[4]);
+    hn::Store(coarse, di, lv[5]);
     int n = 0;
     for (uint32_t b = bits; b != 0; b &= b - 1, ++n) {
       const int i = std::countr_zero(b);
       st.found_lane[n] = i;
       for (int a = 0; a < 3; ++a) {
-        st.found_p[a][n] = lp[a][i];
+        st.found_f[a][n] = lf[a][i];
         st.found_v[a][n] = lv[a][i];
       }
       st.found_fine[n] = lv[3][i];
+      st.found_vertex[n] = lv[4][i];
+      st.found_coarse[n] = lv[5][i];
     }
   }
 #endif
@@ -168,19 +192,50 @@ HWY_INLINE Vec3i ReachLo(const Vec3i& v, int e) {
   return Vec3i{4 * (v.x >> 2) - e, 4 * (v.y >> 2) - e, 4 * (v.z >> 2) - e};
 }
 
+// Where a marcher's samples go: MarchSamples and their blocks, or the
+// renderer's records (with the ray's index) and the count of samples that
+// have no MLP or block.
+struct Out {
+  MarchSample* samples = nullptr;
+  int32_t* blocks = nullptr;
+  FastSample* records = nullptr;
+  uint32_t ray = 0;
+  int written = 0;  // records written
+  uint64_t* missing = nullptr;
+};
+
 // Hands out up to `room` of a marcher's pending samples, in order; returns
 // how many.
-HWY_INLINE int Emit(FastMarcher::State& st, const Grid& g, MarchSample* out, int32_t* blocks, int room) {
+template <bool kRecords>
+HWY_INLINE int Emit(FastMarcher::State& st, const Grid& g, Out& out, int room) {
   int n = 0;
   while (st.pending != 0 && n < room) {
     st.pending &= st.pending - 1;
     const int j = st.found_next++;
-    MarchSample& s = out[n];
-    s.k = st.chunk_k + st.found_lane[j];
-    s.p_micro = Vec3f{st.found_p[0][j], st.found_p[1][j], st.found_p[2][j]};
-    s.voxel = Vec3i{st.found_v[0][j], st.found_v[1][j], st.found_v[2][j]};
+    ++n;
     st.block = g.fine_to_block[st.found_fine[j]];
-    blocks[n++] = st.block;
+    const Vec3i v{st.found_v[0][j], st.found_v[1][j], st.found_v[2][j]};
+    if (kRecords) {
+      const int32_t mlp = g.coarse_to_mlp[st.found_coarse[j]];
+      if (mlp < 0 || st.block < 0) {
+        ++*out.missing;
+        continue;
+      }
+      FastSample& r = out.records[out.written++];
+      r.ray = out.ray;
+      r.mlp = uint32_t(mlp);
+      r.vertex = uint32_t(size_t(st.block) * kBlockVerts + size_t(st.found_vertex[j]));
+      r.fx = st.found_f[0][j];
+      r.fy = st.found_f[1][j];
+      r.fz = st.found_f[2][j];
+    } else {
+      MarchSample& s = out.samples[out.written];
+      s.k = st.chunk_k + st.found_lane[j];
+      // v + (p - v) is p: the difference of a float in [v, v + 1] and v >= 0 is exact.
+      s.p_micro = Vec3f{float(v.x) + st.found_f[0][j], float(v.y) + st.found_f[1][j], float(v.z) + st.found_f[2][j]};
+      s.voxel = v;
+      out.blocks[out.written++] = st.block;
+    }
   }
   return n;
 }
@@ -223,23 +278,28 @@ HWY_INLINE bool Advance(FastMarcher::State& st, const Grid& g) {
   return true;
 }
 
-void MarchGroup(FastMarcher* const* marchers, int n, int limit, MarchSample* samples, int32_t* blocks, int* counts,
-                bool* ended) {
+// The march of fast_march_group (out[i].samples, blocks) or fast_march_records
+// (out[i].records); counts[i]: the samples (records) written.
+template <bool kRecords>
+void MarchOut(FastMarcher* const* marchers, int n, int limit, Out* out, int* counts, bool* ended) {
   if (n <= 0) return;
   const FastMarcher::State& s0 = marchers[0]->state();
   Grid g;
   g.words = s0.skip->fine_words.data();
   g.reach = s0.skip->reach.data();
   g.fine_to_block = s0.model->fine_to_block.data();
+  g.coarse_to_mlp = s0.model->coarse_to_mlp.data();
   g.micro_res = s0.model->micro_res;
   g.fine_res = s0.skip->res;
+  g.coarse_res = s0.model->coarse_res();
   g.hi = float(g.micro_res);
   // The marchers' iterations interleaved: their dependency chains (point,
   // voxel, lookup, jump) are independent, so the CPU overlaps them.
   int active = 0;
   bool done[kFastMarchGroup];
+  int handed[kFastMarchGroup];  // samples handed out (records written, or left out as missing)
   for (int i = 0; i < n; ++i) {
-    counts[i] = 0;
+    handed[i] = 0;
     ended[i] = false;
     done[i] = limit <= 0;
     active += !done[i];
@@ -254,15 +314,36 @@ void MarchGroup(FastMarcher* const* marchers, int n, int limit, MarchSample* sam
         continue;
       }
       if (st.pending == 0) continue;
-      const size_t at = size_t(i) * size_t(limit) + size_t(counts[i]);
-      counts[i] += Emit(st, g, samples + at, blocks + at, limit - counts[i]);
-      if (counts[i] == limit) {
+      handed[i] += Emit<kRecords>(st, g, out[i], limit - handed[i]);
+      if (handed[i] == limit) {
         done[i] = true;
         ended[i] = st.pending == 0 && st.k > st.k_end;
         --active;
       }
     }
   }
+  for (int i = 0; i < n; ++i) counts[i] = out[i].written;
+}
+
+void MarchGroup(FastMarcher* const* marchers, int n, int limit, MarchSample* samples, int32_t* blocks, int* counts,
+                bool* ended) {
+  Out out[kFastMarchGroup];
+  for (int i = 0; i < n; ++i) {
+    out[i].samples = samples + size_t(i) * size_t(limit);
+    out[i].blocks = blocks + size_t(i) * size_t(limit);
+  }
+  MarchOut<false>(marchers, n, limit, out, counts, ended);
+}
+
+void MarchRecords(FastMarcher* const* marchers, const uint32_t* rays, int n, int limit, FastSample* records,
+                  int* counts, bool* ended, uint64_t* missing) {
+  Out out[kFastMarchGroup];
+  for (int i = 0; i < n; ++i) {
+    out[i].records = records + size_t(i) * size_t(limit);
+    out[i].ray = rays[i];
+    out[i].missing = missing;
+  }
+  MarchOut<true>(marchers, n, limit, out, counts, ended);
 }
 
 // std::max and std::min of doubles, lane by lane with their exact semantics
@@ -319,8 +400,10 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
   grid.words = skip.fine_words.data();
   grid.reach = skip.reach.data();
   grid.fine_to_block = model.fine_to_block.data();
+  grid.coarse_to_mlp = model.coarse_to_mlp.data();
   grid.micro_res = model.micro_res;
   grid.fine_res = skip.res;
+  grid.coarse_res = model.coarse_res();
   grid.hi = grid_hi;
   constexpr size_t kMax = HWY_MAX_BYTES / sizeof(double);
   const size_t L = hn::Lanes(dd);
@@ -515,6 +598,7 @@ HWY_AFTER_NAMESPACE();
 namespace edrnr {
 
 HWY_EXPORT(MarchGroup);
+HWY_EXPORT(MarchRecords);
 HWY_EXPORT(SetupRays);
 
 void fast_setup_rays(const SceneModel& model, const FastSkipGrid& skip, const Camera& camera, float delta,
@@ -526,6 +610,11 @@ void fast_setup_rays(const SceneModel& model, const FastSkipGrid& skip, const Ca
 void fast_march_group(FastMarcher* const* marchers, int n, int limit, MarchSample* samples, int32_t* blocks,
                       int* counts, bool* ended) {
   HWY_DYNAMIC_DISPATCH(MarchGroup)(marchers, n, limit, samples, blocks, counts, ended);
+}
+
+void fast_march_records(FastMarcher* const* marchers, const uint32_t* rays, int n, int limit, FastSample* records,
+                        int* counts, bool* ended, uint64_t* missing) {
+  HWY_DYNAMIC_DISPATCH(MarchRecords)(marchers, rays, n, limit, records, counts, ended, missing);
 }
 
 }  // namespace edrnr

@@ -2,12 +2,14 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdlib>
 #include <random>
 
 #include "core/error.h"
 #include "core/metrics.h"
+#include "fast_scenes.h"
 #include "model/procedural.h"
 #include "render/cameras.h"
 #include "render/fast.h"
@@ -19,20 +21,9 @@
 namespace edrnr {
 namespace {
 
-SceneModel several_model(int res, bool store_float = true) {
-  ProceduralOptions o;
-  o.micro_res = res;
-  o.store_float = store_float;
-  o.seed = 7;  // pseudo-random unused channels: every feature channel is read
-  return make_procedural_model("several", procedural_shapes("several"), o);
-}
-
-// Views around the scene at several azimuths and elevations, odd sizes so
-// that tiles are cut at the image edges.
-std::vector<Camera> views(int w, int h) {
-  return {orbit_camera(w, h, 0, 30, 4, 50), orbit_camera(w, h, 75, 10, 4.5, 45), orbit_camera(w, h, 200, 60, 4, 50),
-          orbit_camera(w, h, 310, -20, 3.5, 60)};
-}
+using fast_test::expect_reference_samples;
+using fast_test::several_model;
+using fast_test::views;
 
 TEST(Fast, FloatPathMatchesTheReference) {
   const SceneModel m = several_model(128);
@@ -56,31 +47,6 @@ TEST(Fast, FloatPathMatchesTheReference) {
   }
 }
 
-// Marches every pixel ray of `cam` with both marchers and asserts the same
-// samples; adds the samples seen to *total and raises *k_max to the largest
-// candidate index.
-void expect_reference_samples(const SceneModel& m, const FastSkipGrid& skip, const Camera& cam, float delta,
-                              size_t* total, int64_t* k_max) {
-  for (int y = 0; y < cam.height; ++y)
-    for (int x = 0; x < cam.width; ++x) {
-      const Ray ray = cam.pixel_ray(x, y);
-      const MicroRay mr = make_micro_ray(m, ray, delta);
-      SampleMarcher ref(m, ray, mr, true);
-      FastMarcher fast(m, skip, ray, mr);
-      MarchSample a, b;
-      for (;;) {
-        const bool more = ref.next(a);
-        ASSERT_EQ(fast.next(b), more) << "pixel " << x << "," << y;
-        if (!more) break;
-        ASSERT_EQ(a.k, b.k);
-        ASSERT_EQ(a.voxel, b.voxel);
-        ASSERT_EQ(a.p_micro, b.p_micro);
-        *k_max = std::max(*k_max, a.k);
-        ++*total;
-      }
-    }
-}
-
 // The fast march yields exactly the reference march's samples (same k, same
 // point, same voxel), ray by ray, at several steps and from inside and outside
 // the object.
@@ -99,54 +65,6 @@ TEST(Fast, MarchYieldsTheReferenceSamples) {
       }
       EXPECT_GT(total, 200u) << res << " " << step;
     }
-  }
-}
-
-// Many small solids, a micro voxel or a few across (spheres, thin plates,
-// thin rods) at pseudo-random places: the micro gaps around them vary in every
-// direction, as on trained scenes with fine detail.
-SceneModel dust_model(int res) {
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<float> u(-1.f, 1.f);
-  const float micro = 3.f / float(res);  // micro voxel edge: the default scene box is 3 units wide
-  std::vector<Shape> shapes;
-  for (int i = 0; i < 60; ++i) {
-    Shape s;
-    s.center = Vec3f{u(rng), u(rng), u(rng)};
-    s.sigma = 50.f;
-    s.color = Vec3f{0.5f + 0.4f * u(rng), 0.5f, 0.5f};
-    if (i % 3 == 0) {
-      s.kind = ShapeKind::Sphere;
-      s.radius = micro * (0.6f + 0.8f * (u(rng) + 1.f));
-    } else {
-      s.kind = ShapeKind::Box;
-      const int thin = i % 3;  // plates (1) and rods (2)
-      for (int a = 0; a < 3; ++a) s.half_size[a] = micro * (a < thin ? 0.4f : 3.f + 2.f * u(rng));
-    }
-    shapes.push_back(s);
-  }
-  ProceduralOptions o;
-  o.micro_res = res;
-  return make_procedural_model("dust", shapes, o);
-}
-
-// The jumps by micro gaps (FastSkipGrid::reach) near the surfaces skip no
-// sample: every pixel ray of larger images of small solids, at two steps,
-// yields the reference march's samples.
-TEST(Fast, MarchNearSmallSolidsYieldsTheReferenceSamples) {
-  const SceneModel m = dust_model(128);
-  ASSERT_NEAR(m.scene_box.size().x, 3.f, 1e-6f);
-  const FastSkipGrid skip(m);
-  for (float step : {1.f, 0.43f}) {
-    const float delta = sample_spacing(m, step);
-    size_t total = 0;
-    int64_t k_max = 0;
-    for (const Camera& cam : views(61, 47)) {
-      SCOPED_TRACE(testing::Message() << "step " << step);
-      expect_reference_samples(m, skip, cam, delta, &total, &k_max);
-      if (HasFatalFailure()) return;
-    }
-    EXPECT_GT(total, 2000u) << step;
   }
 }
 
@@ -509,48 +427,6 @@ TEST(Fast, BadInputIsRefused) {
   SceneModel unfinalized = m;
   unfinalized.coarse_to_mlp.clear();
   EXPECT_THROW(FastRenderer(unfinalized, ModelForm::Auto, FastPath::Auto), Error);
-}
-
-// The reach of every fine voxel against a brute-force search of the micro
-// bitmap: 0 for occupied fine voxels; else the Chebyshev gap from the fine
-// voxel's micro voxels to the nearest occupied micro voxel, capped at 4 r
-// (r: the fine distance) for r <= kExactReach and taken as 4 (r - 1)
-// beyond. Below the caps the gap is exact, so the box widened by it touches
-// an occupied micro voxel. The several scene and small solids.
-TEST(Fast, SkipGridReachIsTheMicroGap) {
-  for (const SceneModel& m : {several_model(64, false), dust_model(64)}) {
-    const FastSkipGrid g(m);
-    const Bitmap3& micro = m.occupancy[int(Tier::Micro)];
-    std::vector<Vec3i> occupied;
-    for (int z = 0; z < m.micro_res; ++z)
-      for (int y = 0; y < m.micro_res; ++y)
-        for (int x = 0; x < m.micro_res; ++x)
-          if (micro.get(x, y, z)) occupied.push_back(Vec3i{x, y, z});
-    ASSERT_GT(occupied.size(), 100u);
-    const int res = g.res;
-    ASSERT_EQ(g.reach.size(), size_t(res) * res * res + 3);
-    int fractional = 0;  // near voxels whose reach is not a multiple of 4
-    for (int fz = 0; fz < res; ++fz)
-      for (int fy = 0; fy < res; ++fy)
-        for (int fx = 0; fx < res; ++fx) {
-          const size_t f = size_t(fx) + size_t(res) * (size_t(fy) + size_t(res) * size_t(fz));
-          const int r = g.at(fx, fy, fz);
-          const int e = g.reach[f];
-          if (r == 0) {
-            ASSERT_EQ(e, 0) << fx << "," << fy << "," << fz;
-            continue;
-          }
-          // The gap along an axis from micro coordinate u to [4 f, 4 f + 4).
-          const auto gap = [](int u, int fc) { return u < 4 * fc ? 4 * fc - 1 - u : std::max(0, u - 4 * fc - 4); };
-          int best = 1 << 20;
-          for (const Vec3i& u : occupied) best = std::min(best, std::max({gap(u.x, fx), gap(u.y, fy), gap(u.z, fz)}));
-          const int want = r <= FastSkipGrid::kExactReach ? std::min(best, 4 * r) : 4 * (r - 1);
-          ASSERT_EQ(e, want) << fx << "," << fy << "," << fz << " r " << r;
-          ASSERT_LE(e, best);  // the widened box is empty
-          fractional += r <= FastSkipGrid::kExactReach && e % 4 != 0;
-        }
-    EXPECT_GT(fractional, 10);
-  }
 }
 
 }  // namespace
