@@ -27,7 +27,6 @@ constexpr int kMaxRoundSamples = 8;       // ... doubling each round up to this
 // round, so fewer samples past its end run through an MLP.
 constexpr float kDimTransmittance = 0.9f;
 constexpr int kDimRoundSamples = 2;
-constexpr int kCvMicro = kMicroPerFine * kFinePerCoarse;  // micro voxels per coarse voxel edge
 
 // Interleaves the bits of x and y (x in the even bits).
 uint64_t morton(uint32_t x, uint32_t y) {
@@ -106,8 +105,7 @@ struct TileWork {
   uint32_t begin[kTileRays], end[kTileRays];
   std::vector<FastSample> samples;  // the round's samples: [0, n_samples) (the vector only grows)
   size_t n_samples = 0;
-  std::vector<MarchSample> group_samples;  // fast_march_group's output
-  std::vector<int32_t> group_blocks;
+  std::vector<FastSample> group_records;  // fast_march_records' output
   std::vector<FastSampleOut> outs;
   std::vector<uint32_t> order, count, first, used;
 };
@@ -254,40 +252,25 @@ class TileRenderer {
   // Up to `limit` samples of each ray group[i], i < g (rays in increasing
   // order), marched together; marks the rays whose march ends exhausted.
   void gather(TileWork& w, const int* group, int g, int limit, ThreadTotals& tot) const {
-    const int cr = m_.coarse_res();
     FastMarcher* marchers[kFastMarchGroup];
-    for (int i = 0; i < g; ++i) marchers[i] = &w.marchers[size_t(group[i])];
-    w.group_samples.resize(size_t(kFastMarchGroup) * size_t(limit));
-    w.group_blocks.resize(w.group_samples.size());
+    uint32_t rays[kFastMarchGroup];
+    for (int i = 0; i < g; ++i) {
+      marchers[i] = &w.marchers[size_t(group[i])];
+      rays[i] = uint32_t(group[i]);
+    }
+    w.group_records.resize(size_t(kFastMarchGroup) * size_t(limit));
     int counts[kFastMarchGroup];
     bool ended[kFastMarchGroup];
-    fast_march_group(marchers, g, limit, w.group_samples.data(), w.group_blocks.data(), counts, ended);
+    fast_march_records(marchers, rays, g, limit, w.group_records.data(), counts, ended, &tot.missing);
     for (int i = 0; i < g; ++i) {
       const int r = group[i];
       if (ended[i]) w.exhausted[r] = true;
       w.begin[r] = uint32_t(w.n_samples);
-      const MarchSample* ms = w.group_samples.data() + size_t(i) * size_t(limit);
-      const int32_t* mb = w.group_blocks.data() + size_t(i) * size_t(limit);
+      const FastSample* rec = w.group_records.data() + size_t(i) * size_t(limit);
       for (int j = 0; j < counts[i]; ++j) {
-        const MarchSample& s = ms[j];
-        const int32_t block = mb[j];
-        const Vec3i& v = s.voxel;  // non-negative: unsigned division is a shift
-        const int32_t mlp = m_.coarse_to_mlp[linear_index(int(unsigned(v.x) / kCvMicro), int(unsigned(v.y) / kCvMicro),
-                                                          int(unsigned(v.z) / kCvMicro), cr)];
-        if (mlp < 0 || block < 0) {
-          ++tot.missing;
-          continue;
-        }
-        FastSample& f = w.samples[w.n_samples++];
-        f.ray = uint32_t(r);
-        f.mlp = uint32_t(mlp);
-        if (w.count[size_t(mlp)]++ == 0) w.used.push_back(uint32_t(mlp));
-        const int lx = v.x & (kMicroPerFine - 1), ly = v.y & (kMicroPerFine - 1), lz = v.z & (kMicroPerFine - 1);
-        f.vertex =
-            uint32_t(size_t(block) * kBlockVerts + size_t(lx + kBlockVertsPerAxis * (ly + kBlockVertsPerAxis * lz)));
-        f.fx = s.p_micro.x - float(v.x);
-        f.fy = s.p_micro.y - float(v.y);
-        f.fz = s.p_micro.z - float(v.z);
+        const uint32_t mlp = rec[j].mlp;
+        if (w.count[mlp]++ == 0) w.used.push_back(mlp);
+        w.samples[w.n_samples++] = rec[j];
       }
       w.end[r] = uint32_t(w.n_samples);
     }

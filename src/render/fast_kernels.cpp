@@ -77,20 +77,20 @@ struct Epilogue {
 // one product at a time in input order. kFma: fused multiply-add (the Int8
 // path, whose products and sums are exact integers); otherwise multiply then
 // add, the reference's rounding.
-template <int NB, bool kFma>
-HWY_INLINE void DenseBlock(DF d, size_t N, const float* X, int in, int i0, int i1, const float* W, const float* B,
+template <int NB, bool kFma, class DT>
+HWY_INLINE void DenseBlock(DT d, size_t N, const float* X, int in, int i0, int i1, const float* W, const float* B,
                            int o, float* ACC, const Epilogue& e) {
-  VF acc[NB];
+  hn::Vec<DT> acc[NB];
   for (int k = 0; k < NB; ++k) acc[k] = B ? hn::Set(d, B[o + k]) : hn::Zero(d);
   for (int i = i0; i < i1; ++i) {
-    const VF x = hn::Load(d, X + size_t(i) * N);
+    const hn::Vec<DT> x = hn::Load(d, X + size_t(i) * N);
     for (int k = 0; k < NB; ++k) {
-      const VF w = hn::Set(d, W[size_t(o + k) * size_t(in) + size_t(i)]);
+      const hn::Vec<DT> w = hn::Set(d, W[size_t(o + k) * size_t(in) + size_t(i)]);
       acc[k] = kFma ? hn::MulAdd(w, x, acc[k]) : hn::Add(acc[k], hn::Mul(w, x));
     }
   }
   for (int k = 0; k < NB; ++k) {
-    VF v = acc[k];
+    hn::Vec<DT> v = acc[k];
     if (e.mult) {
       v = hn::Round(hn::Mul(v, hn::Set(d, e.mult[o + k])));
       v = hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi));
@@ -101,8 +101,8 @@ HWY_INLINE void DenseBlock(DF d, size_t N, const float* X, int in, int i0, int i
   }
 }
 
-template <bool kFma>
-void Dense(DF d, size_t N, const float* X, int in, int i0, int i1, const float* W, const float* B, int out, float* ACC,
+template <bool kFma, class DT>
+void Dense(DT d, size_t N, const float* X, int in, int i0, int i1, const float* W, const float* B, int out, float* ACC,
            const Epilogue& e = Epilogue()) {
   int o = 0;
   for (; o + 8 <= out; o += 8) DenseBlock<8, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
@@ -120,14 +120,14 @@ void Dense(DF d, size_t N, const float* X, int in, int i0, int i1, const float* 
 // Features of the chunk's samples from INT4 codes, 8 channels per 32-bit
 // word (F a multiple of 8), into rows of X: float values (Float) or the
 // density net's INT8 inputs (Int8, feature_in: per-channel multipliers).
-template <bool kInt8>
-void InterpolateQ4(DF d, size_t N, const FastModel& fm, Scratch& s, const float* feature_in, float* X) {
-  const hn::RebindToUnsigned<DF> du;
-  const hn::RebindToSigned<DF> di;
-  const VF one = hn::Set(d, 1.f);
-  const VF fx = hn::Load(d, s.fx), fy = hn::Load(d, s.fy), fz = hn::Load(d, s.fz);
-  const VF wx[2] = {hn::Sub(one, fx), fx}, wy[2] = {hn::Sub(one, fy), fy}, wz[2] = {hn::Sub(one, fz), fz};
-  VF w[8];
+template <bool kInt8, class DT>
+void InterpolateQ4(DT d, size_t N, const FastModel& fm, Scratch& s, const float* feature_in, float* X) {
+  const hn::RebindToUnsigned<DT> du;
+  const hn::RebindToSigned<DT> di;
+  const hn::Vec<DT> one = hn::Set(d, 1.f);
+  const hn::Vec<DT> fx = hn::Load(d, s.fx), fy = hn::Load(d, s.fy), fz = hn::Load(d, s.fz);
+  const hn::Vec<DT> wx[2] = {hn::Sub(one, fx), fx}, wy[2] = {hn::Sub(one, fy), fy}, wz[2] = {hn::Sub(one, fz), fz};
+  hn::Vec<DT> w[8];
   for (int j = 0; j < 8; ++j) w[j] = hn::Mul(hn::Mul(wx[j & 1], wy[(j >> 1) & 1]), wz[j >> 2]);
   // The codes as 32-bit words (8 channels each): F / 8 words per vertex,
   // gathered per corner (the feature array starts on an allocation boundary).
@@ -164,8 +164,8 @@ void InterpolateQ4(DF d, size_t N, const FastModel& fm, Scratch& s, const float*
       }
     }
     const int c0 = 8 * g;
-    VF acc[8];
-    VF zp[8], scale[8];
+    hn::Vec<DT> acc[8];
+    hn::Vec<DT> zp[8], scale[8];
     for (int k = 0; k < 8; ++k) {
       acc[k] = hn::Zero(d);
       zp[k] = hn::Set(d, fm.feature_zero_point[size_t(c0 + k)]);
@@ -174,7 +174,7 @@ void InterpolateQ4(DF d, size_t N, const FastModel& fm, Scratch& s, const float*
     for (int j = 0; j < 8; ++j) {
       const auto word = hn::Load(du, words + size_t(j) * N);
       for (int k = 0; k < 8; ++k) {
-        const VF code = hn::ConvertTo(d, hn::BitCast(di, hn::And(hn::ShiftRightSame(word, 4 * k), mask)));
+        const hn::Vec<DT> code = hn::ConvertTo(d, hn::BitCast(di, hn::And(hn::ShiftRightSame(word, 4 * k), mask)));
         if (kInt8) {
           acc[k] = hn::MulAdd(w[j], code, acc[k]);
         } else {  // the reference: (code - zero point) * scale, weighted, added in corner order
@@ -183,7 +183,7 @@ void InterpolateQ4(DF d, size_t N, const FastModel& fm, Scratch& s, const float*
       }
     }
     for (int k = 0; k < 8; ++k) {
-      VF v = acc[k];
+      hn::Vec<DT> v = acc[k];
       if (kInt8) {
         v = hn::Round(hn::Mul(hn::Sub(v, zp[k]), hn::Set(d, feature_in[c0 + k])));
         v = hn::Min(hn::Max(v, hn::Set(d, -128.f)), hn::Set(d, 127.f));
@@ -222,11 +222,12 @@ void InterpolateScalar(size_t N, const FastModel& fm, const Scratch& s, float* X
 }
 
 // rows[r] = clamp(round(rows[r] * mult[r or 0]), lo, hi) for r < count.
-void Requantize(DF d, size_t N, float* rows, int count, const float* mult, bool per_row, float lo, float hi) {
+template <class DT>
+void Requantize(DT d, size_t N, float* rows, int count, const float* mult, bool per_row, float lo, float hi) {
   for (int r = 0; r < count; ++r) {
-    const VF m = hn::Set(d, mult[per_row ? r : 0]);
+    const hn::Vec<DT> m = hn::Set(d, mult[per_row ? r : 0]);
     float* p = rows + size_t(r) * N;
-    const VF v = hn::Round(hn::Mul(hn::Load(d, p), m));
+    const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Load(d, p), m));
     hn::Store(hn::Min(hn::Max(v, hn::Set(d, lo)), hn::Set(d, hi)), d, p);
   }
 }
@@ -235,8 +236,8 @@ void Requantize(DF d, size_t N, float* rows, int count, const float* mult, bool 
 // hidden layers through a and b. Int8 with split >= 0: the first layer's
 // products of the inputs from split on (the direction) are not summed here but
 // read from dir_q (DirectionParts) at each sample's slot.
-template <bool kInt8>
-void RunNet(DF d, size_t N, const std::vector<FastLayer>& net, const float* p, const float* in, float* a, float* b,
+template <bool kInt8, class DT>
+void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, const float* in, float* a, float* b,
             float* last, int split, const float* dir_q, const int32_t* slots) {
   // Int8, split >= 0: dir_q points at the chunk's first slot, slots holds the
   // lanes' slots relative to it (each below the lane count).
@@ -260,12 +261,12 @@ void RunNet(DF d, size_t N, const std::vector<FastLayer>& net, const float* p, c
       // were summed per ray (DirectionParts): added by the sample's slot,
       // then the epilogue.
       Dense<true>(d, N, x, L.in, 0, split, p + L.w, p + L.b, L.out, y);
-      const hn::RebindToSigned<DF> di;
+      const hn::RebindToSigned<DT> di;
       const auto lanes = hn::IndicesFromVec(d, hn::Load(di, slots));
       for (int o = 0; o < L.out; ++o) {
         float* r = y + size_t(o) * N;
-        const VF q = hn::TableLookupLanes(hn::LoadU(d, dir_q + size_t(o) * kDirRow), lanes);
-        const VF v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), q), hn::Set(d, e.mult[o])));
+        const hn::Vec<DT> q = hn::TableLookupLanes(hn::LoadU(d, dir_q + size_t(o) * kDirRow), lanes);
+        const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), q), hn::Set(d, e.mult[o])));
         hn::Store(hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi)), d, r);
       }
     } else {
@@ -276,10 +277,11 @@ void RunNet(DF d, size_t N, const std::vector<FastLayer>& net, const float* p, c
 }
 
 // Rows [G, G + D) of X: direction value k of ray rays[l] in lane l.
-void GatherDirections(DF d, size_t N, const float* dir, size_t ray_stride, const uint32_t* rays, int G, int D,
+template <class DT>
+void GatherDirections(DT d, size_t N, const float* dir, size_t ray_stride, const uint32_t* rays, int G, int D,
                       float* X) {
-  const hn::RebindToSigned<DF> di;
-  const auto ray = hn::BitCast(di, hn::Load(hn::RebindToUnsigned<DF>(), rays));
+  const hn::RebindToSigned<DT> di;
+  const auto ray = hn::BitCast(di, hn::Load(hn::RebindToUnsigned<DT>(), rays));
   // Consecutive rays (the common case: neighbouring pixels): plain loads.
   const bool run = hn::AllTrue(di, hn::Eq(ray, hn::Add(hn::Set(di, int32_t(rays[0])), hn::Iota(di, 0))));
   for (int k = 0; k < D; ++k) {
@@ -292,11 +294,12 @@ void GatherDirections(DF d, size_t N, const float* dir, size_t ray_stride, const
 // the colour net's first-layer products of the direction inputs, summed in
 // input order, brought to accumulator units with the multiplier dir_in and
 // rounded (as the chip adds them to the other products).
-void DirectionParts(DF d, size_t N, const FastModel& fm, const float* p, const float* dir, size_t ray_stride,
+template <class DT>
+void DirectionParts(DT d, size_t N, const FastModel& fm, const float* p, const float* dir, size_t ray_stride,
                     const uint32_t* rays, size_t count, Scratch& s) {
   const FastLayer& L = fm.color.front();
   const int G = fm.geo_width, D = fm.dir_dims;
-  const VF m = hn::Set(d, p[fm.dir_in]);
+  const hn::Vec<DT> m = hn::Set(d, p[fm.dir_in]);
   alignas(64) uint32_t lane_rays[kCap];
   for (size_t j0 = 0; j0 < count; j0 += N) {
     for (size_t l = 0; l < N; ++l) lane_rays[l] = rays[std::min(j0 + l, count - 1)];
@@ -307,13 +310,14 @@ void DirectionParts(DF d, size_t N, const FastModel& fm, const float* p, const f
   }
 }
 
-VF Sigmoid(DF d, VF x) {
-  const VF one = hn::Set(d, 1.f);
+template <class DT>
+hn::Vec<DT> Sigmoid(DT d, hn::Vec<DT> x) {
+  const hn::Vec<DT> one = hn::Set(d, 1.f);
   return hn::Div(one, hn::Add(one, hn::Exp(d, hn::Neg(x))));
 }
 
-template <bool kInt8>
-void EvalChunk(DF d, size_t N, const FastModel& fm, const float* p, const float* dir, size_t ray_stride, float delta,
+template <bool kInt8, class DT>
+void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const float* dir, size_t ray_stride, float delta,
                Scratch& s, FastKernelSeconds* seconds) {
   Clock::time_point t0;
   if (seconds) t0 = Clock::now();
@@ -332,31 +336,61 @@ void EvalChunk(DF d, size_t N, const FastModel& fm, const float* p, const float*
 
   // Density net: its G outputs land in the first rows of the colour input.
   RunNet<kInt8>(d, N, fm.density, p, s.a, s.a, s.b, s.cin, -1, nullptr, nullptr);
-  VF raw = hn::Load(d, s.cin);
+  hn::Vec<DT> raw = hn::Load(d, s.cin);
   if (kInt8) {
     raw = hn::Mul(raw, hn::Set(d, 1.f / 256.f));
     Requantize(d, N, s.cin, G, p + fm.geo_in, false, -128.f, 127.f);
   }
-  const VF sigma = hn::Exp(d, hn::Min(hn::Max(raw, hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
-  const VF tau = hn::Mul(sigma, hn::Set(d, delta));
-  const VF alpha = hn::Neg(hn::Expm1(d, hn::Neg(tau)));
-  const VF trans = kInt8 ? hn::Sub(hn::Set(d, 1.f), alpha) : hn::Exp(d, hn::Neg(tau));
+  const hn::Vec<DT> sigma = hn::Exp(d, hn::Min(hn::Max(raw, hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
+  const hn::Vec<DT> tau = hn::Mul(sigma, hn::Set(d, delta));
+  const hn::Vec<DT> alpha = hn::Neg(hn::Expm1(d, hn::Neg(tau)));
+  const hn::Vec<DT> trans = kInt8 ? hn::Sub(hn::Set(d, 1.f), alpha) : hn::Exp(d, hn::Neg(tau));
   hn::Store(alpha, d, s.out);
   hn::Store(trans, d, s.out + N);
   // Float: the rays' direction inputs after the density outputs (Int8: in dir_q).
   if (!kInt8) GatherDirections(d, N, dir, ray_stride, s.ray, G, D, s.cin);
   RunNet<kInt8>(d, N, fm.color, p, s.cin, s.a, s.b, s.rgb, kInt8 && D > 0 ? G : -1, s.dir_q + s.slot_base, s.slot);
   for (int c = 0; c < 3; ++c) {
-    VF v = hn::Load(d, s.rgb + size_t(c) * N);
+    hn::Vec<DT> v = hn::Load(d, s.rgb + size_t(c) * N);
     if (kInt8) v = hn::Mul(v, hn::Set(d, 1.f / 256.f));
     hn::Store(Sigmoid(d, v), d, s.out + size_t(2 + c) * N);
   }
   if (seconds) seconds->mlp += std::chrono::duration<double>(Clock::now() - t1).count();
 }
 
+// One chunk of a batch: samples order[0, valid) in the lanes of d (the tail
+// repeats the last sample; Int8: slots[l] is lane l's slot in s.dir_q), their
+// outputs to out.
+template <bool kInt8, class DT>
+void RunChunk(DT d, const FastModel& fm, const float* p, const FastSample* samples, const uint32_t* order, size_t valid,
+              const int32_t* slots, const float* dir, size_t ray_stride, float delta, Scratch& s, FastSampleOut* out,
+              FastKernelSeconds* seconds) {
+  const size_t N = hn::Lanes(d);
+  for (size_t l = 0; l < N; ++l) {
+    const size_t i = std::min(l, valid - 1);
+    const FastSample& x = samples[order[i]];
+    s.fx[l] = x.fx;
+    s.fy[l] = x.fy;
+    s.fz[l] = x.fz;
+    s.vertex[l] = x.vertex;
+    s.ray[l] = x.ray;
+    s.slot[l] = kInt8 ? slots[i] : 0;
+  }
+  s.slot_base = s.slot[0];
+  for (size_t l = 0; l < N; ++l) s.slot[l] -= s.slot_base;
+  EvalChunk<kInt8>(d, N, fm, p, dir, ray_stride, delta, s, seconds);
+  for (size_t l = 0; l < valid; ++l) {
+    FastSampleOut& o = out[order[l]];
+    o.alpha = s.out[l];
+    o.trans = s.out[N + l];
+    for (int c = 0; c < 3; ++c) o.rgb[c] = s.out[size_t(2 + c) * N + l];
+  }
+}
+
 void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, const uint32_t* order, size_t n,
                const float* dir, size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds) {
   const DF d;
+  const hn::Half<DF> dh;
   const size_t N = hn::Lanes(d);
   Scratch s;
   const float* p = fm.mlp(mlp);
@@ -383,18 +417,6 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, con
       }
       DirectionParts(d, N, fm, p, dir, ray_stride, seg_rays, slots, s);
     }
-    for (size_t l = 0; l < N; ++l) {
-      const size_t i = i0 + std::min(l, valid - 1);  // the tail repeats the last sample
-      const FastSample& x = samples[order[i]];
-      s.fx[l] = x.fx;
-      s.fy[l] = x.fy;
-      s.fz[l] = x.fz;
-      s.vertex[l] = x.vertex;
-      s.ray[l] = x.ray;
-      s.slot[l] = int8 ? seg_slot[i - seg_begin] : 0;
-    }
-    s.slot_base = s.slot[0];
-    for (size_t l = 0; l < N; ++l) s.slot[l] -= s.slot_base;
     // The next chunk's feature words (mostly in L3: the features are larger
     // than L2) are fetched while this chunk runs: per sample the four runs
     // of x-neighbour corners (InterpolateQ4).
@@ -405,15 +427,20 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, con
         for (int j = 0; j < 8; j += 2) hwy::Prefetch(v + kCornerVertex[j] * vertex_bytes);
       }
     }
-    if (int8)
-      EvalChunk<true>(d, N, fm, p, dir, ray_stride, delta, s, seconds);
-    else
-      EvalChunk<false>(d, N, fm, p, dir, ray_stride, delta, s, seconds);
-    for (size_t l = 0; l < valid; ++l) {
-      FastSampleOut& o = out[order[i0 + l]];
-      o.alpha = s.out[l];
-      o.trans = s.out[N + l];
-      for (int c = 0; c < 3; ++c) o.rgb[c] = s.out[size_t(2 + c) * N + l];
+    // A batch's last chunk, when it fills at most half the lanes, runs in
+    // half-width vectors: the lanes are independent, so the results are the
+    // same, for half the work on padding lanes. (Quarter-width vectors for
+    // the shortest tails were slower.)
+    const int32_t* slots = seg_slot + (i0 - seg_begin);
+    if (N >= 8 && valid <= hn::Lanes(dh)) {
+      if (int8)
+        RunChunk<true>(dh, fm, p, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+      else
+        RunChunk<false>(dh, fm, p, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+    } else if (int8) {
+      RunChunk<true>(d, fm, p, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+    } else {
+      RunChunk<false>(d, fm, p, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
     }
   }
 }

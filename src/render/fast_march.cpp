@@ -102,6 +102,56 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
         fine_words[2 * f] = uint32_t(m);
         fine_words[2 * f + 1] = uint32_t(m >> 32);
       }
+
+  // The micro gaps. Near the object (r <= kExactReach) only the shell of fine voxels
+  // at distance r can hold the nearest occupied micro voxel below 4 r (those
+  // nearer are empty, those farther are 4 r or more away); along an axis
+  // where the shell voxel is r away its micro voxel l is 4 (r - 1) + l (or
+  // + 3 - l) away, along the others less than 4 (r - 1). So the gap is
+  // 4 (r - 1) + x for the least x in 0..3 at which some shell mask meets
+  // the micro voxels within x of the near faces, or 4 r if none does.
+  reach.assign(n + 3, 0);
+  // near[kx + 3 ky + 9 kz][x]: the micro voxels within x of the near faces,
+  // per axis kind k: 0 all four (the shell voxel is nearer than r along the
+  // axis), 1 l <= x (r ahead), 2 l >= 3 - x (r behind).
+  uint64_t near[27][4];
+  for (int kind = 0; kind < 27; ++kind)
+    for (int x = 0; x < 4; ++x) {
+      uint32_t bits[3];
+      for (int a = 0, k = kind; a < 3; ++a, k /= 3)
+        bits[a] = k % 3 == 0 ? 0xFu : k % 3 == 1 ? (2u << x) - 1 : (0xFu << (3 - x)) & 0xFu;
+      uint64_t m = 0;
+      for (int i = 0; i < 64; ++i)
+        if ((bits[0] >> (i & 3)) & (bits[1] >> ((i >> 2) & 3)) & (bits[2] >> (i >> 4)) & 1) m |= uint64_t(1) << i;
+      near[kind][x] = m;
+    }
+  const auto kind_of = [](int d, int r) { return d == r ? 1 : d == -r ? 2 : 0; };
+  for (int fz = 0; fz < res; ++fz)
+    for (int fy = 0; fy < res; ++fy)
+      for (int fx = 0; fx < res; ++fx) {
+        const size_t f = size_t(fx) + R * (size_t(fy) + R * size_t(fz));
+        const int r = distance[f];
+        if (r == 0) continue;
+        if (r > kExactReach) {
+          reach[f] = uint8_t(4 * (r - 1));
+          continue;
+        }
+        int best = 4;  // x, or 4: no shell mask within 3
+        for (int dz = std::max(-r, -fz); dz <= std::min(r, res - 1 - fz); ++dz)
+          for (int dy = std::max(-r, -fy); dy <= std::min(r, res - 1 - fy); ++dy)
+            for (int dx = std::max(-r, -fx); dx <= std::min(r, res - 1 - fx); ++dx) {
+              const size_t gi = size_t(fx + dx) + R * (size_t(fy + dy) + R * size_t(fz + dz));
+              if (distance[gi] != 0) continue;  // also every voxel inside the shell
+              const uint64_t m = uint64_t(fine_words[2 * gi]) | (uint64_t(fine_words[2 * gi + 1]) << 32);
+              const uint64_t* nm = near[kind_of(dx, r) + 3 * kind_of(dy, r) + 9 * kind_of(dz, r)];
+              for (int x = 0; x < best; ++x)
+                if (m & nm[x]) {
+                  best = x;
+                  break;
+                }
+            }
+        reach[f] = uint8_t(4 * (r - 1) + best);
+      }
 }
 
 FastMarcher::FastMarcher(const SceneModel& model, const FastSkipGrid& skip, const Ray& ray, const MicroRay& micro_ray) {

@@ -3,13 +3,16 @@
 // (render/traversal.h: the same candidates k, the same float points p_k, the
 // same range of k inside the widened object AABB), found with less work.
 //
-//   - Empty fine voxels are skipped a cube at a time: FastSkipGrid holds, per
-//     fine voxel, its Chebyshev distance (in fine voxels, capped) to the
-//     nearest occupied one, so a ray at an empty fine voxel at distance r >= 3
-//     jumps past the cube of (2r - 1)^3 fine voxels around it, all empty. This
-//     stands in for the coarse and fine tiers (a coarse cell is empty iff its
-//     fine voxels are), with fewer steps through large empty regions.
-//   - From a candidate at distance 2 or less on, a SIMD vector of consecutive
+//   - Empty space is skipped a box at a time: FastSkipGrid holds, per fine
+//     voxel, its reach e: how many micro voxels its box can be widened by on
+//     every side and stay empty (far from the object e = 4 (r - 1) for the
+//     Chebyshev distance r in fine voxels, capped; near it the exact micro
+//     gap), so a ray at an empty fine voxel jumps past that box. This stands
+//     in for the coarse and fine tiers (a coarse cell is empty iff its fine
+//     voxels are), with few steps through large empty regions, and jumps a
+//     few micro voxels past the empty fine voxels next to the object.
+//   - From a candidate in a fine voxel with reach 0 (occupied, or touching
+//     an occupied micro voxel) on, a SIMD vector of consecutive
 //     candidates (16 with AVX-512) is tested at once: points, micro voxels
 //     and one gather from 64-bit masks of the fine voxels' 4x4x4 micro voxels
 //     (the leaf and micro tiers in one bit), with no branch per candidate.
@@ -27,6 +30,7 @@
 
 #include "data/camera.h"
 #include "model/scene_model.h"
+#include "render/fast_kernels.h"
 #include "render/traversal.h"
 
 namespace edrnr {
@@ -35,6 +39,7 @@ namespace edrnr {
 // the micro occupancy of every fine voxel as a 64-bit mask.
 struct FastSkipGrid {
   static constexpr int kMaxDistance = 15;  // cap, fine voxels
+  static constexpr int kExactReach = 2;    // distance up to which reach is the exact micro gap (capped)
   int res = 0;                             // fine resolution
   Box3d region;  // scene units: the object AABB's micro voxels widened by one, where candidates are considered
   // Per fine voxel: 0: occupied; r: every fine voxel within r - 1 is empty.
@@ -45,6 +50,13 @@ struct FastSkipGrid {
   // voxel (lx, ly, lz) of it is occupied (the 64-bit mask of its 4x4x4 micro
   // voxels, low half first).
   std::vector<uint32_t> fine_words;
+  // Per fine voxel: 0 if occupied; else e, in micro voxels, such that the
+  // box of the fine voxel's 4x4x4 micro voxels widened by e on every side
+  // holds no occupied micro voxel (per fine_words): the Chebyshev gap to the
+  // nearest one, capped at 4 r for fine voxels at distance r <= kExactReach,
+  // and 4 (r - 1) beyond (exact gaps up to r = 3 saved 0.3 % of the lookups
+  // on lego). Padded like `distance`.
+  std::vector<uint8_t> reach;
 
   // Built from the fine and micro tiers of a model (check_structure()d).
   explicit FastSkipGrid(const SceneModel& model);
@@ -93,14 +105,19 @@ class FastMarcher {
     int32_t block = -1;
     uint64_t checks = 0;
     // The last chunk's samples in order, as the vector test found them: the
-    // candidate's lane (k - chunk_k), point, micro voxel and fine voxel
-    // index; entries [found_next, found_next + popcount(pending)) are pending.
+    // candidate's lane (k - chunk_k), its point's position in its micro
+    // voxel (p - v per axis: exact, so v + f is p), the micro voxel, the fine
+    // voxel index, the micro voxel's block vertex (lx + 5 (ly + 5 lz)) and
+    // the coarse voxel index; entries [found_next, found_next +
+    // popcount(pending)) are pending.
     static constexpr int kMaxChunk = 16;
     int found_next = 0;
     alignas(64) int32_t found_lane[kMaxChunk];
-    alignas(64) float found_p[3][kMaxChunk];
+    alignas(64) float found_f[3][kMaxChunk];
     alignas(64) int32_t found_v[3][kMaxChunk];
     alignas(64) int32_t found_fine[kMaxChunk];
+    alignas(64) int32_t found_vertex[kMaxChunk];
+    alignas(64) int32_t found_coarse[kMaxChunk];
 
     // A candidate after k (whose point lies in the box of `size` micro
     // voxels from micro voxel `lo`) such that every candidate between them
@@ -132,6 +149,13 @@ class FastMarcher {
   State st_;
 };
 
+// Fine voxels whose reach (FastSkipGrid::reach) is at least this many micro
+// voxels are jumped past (the fine voxel widened by its reach); from the
+// others on (occupied fine voxels, and empty ones touching an occupied micro
+// voxel) the candidates are tested a vector at a time. Thresholds 2, 4 and 8
+// (8: the fine-voxel cubes only) were slower on lego.
+inline constexpr int kFastJumpReach = 1;
+
 // The most marchers fast_march_group advances together.
 inline constexpr int kFastMarchGroup = 4;
 
@@ -145,15 +169,26 @@ inline constexpr int kFastMarchGroup = 4;
 void fast_march_group(FastMarcher* const* marchers, int n, int limit, MarchSample* samples, int32_t* blocks,
                       int* counts, bool* ended);
 
+// fast_march_group with the samples written as the renderer's records
+// (FastSample, render/fast_kernels.h): ray rays[i], the MLP of the coarse
+// voxel (model.coarse_to_mlp), block * 125 + the micro voxel's block vertex
+// (model.fine_to_block), and the point's position in the micro voxel. Up to
+// `limit` samples of marcher i are handed out; records[i * limit + j], j <
+// counts[i], are those whose coarse voxel has an MLP and whose fine voxel
+// has a block (the others, which a valid model does not have, are added to
+// *missing).
+void fast_march_records(FastMarcher* const* marchers, const uint32_t* rays, int n, int limit, FastSample* records,
+                        int* counts, bool* ended, uint64_t* missing);
+
 // The marchers of n rays of a tile: ray r < n through the centre of pixel
 // (x0 + r % tw, y0 + r / tw). marchers[r] ends up as set_up(model, skip,
 // camera.pixel_ray(...), make_micro_ray(model, ray, delta)) leaves it, bit for
 // bit, with the per-ray divisions and square roots in SIMD lanes (rays with a
 // zero or tiny direction component, or candidate indices from 2^51 on, take
 // set_up itself), and then advanced in the lanes through the empty space in
-// front of the object: the march's jumps from fine voxels at distance 3 or
-// more (and its single steps past candidates outside the grid) are made
-// there until a candidate at distance 2 or less, exactly as the march would
+// front of the object: the march's jumps from fine voxels with a reach of
+// kFastJumpReach or more (and its single steps past candidates outside the
+// grid) are made there until a candidate with a shorter reach, exactly as the march would
 // make them (the same candidates, the same occupancy_checks count); the
 // vector test from that candidate is left to the march (marked dense: it
 // makes no second lookup). Also writes the unit

@@ -2,11 +2,14 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdlib>
+#include <random>
 
 #include "core/error.h"
 #include "core/metrics.h"
+#include "fast_scenes.h"
 #include "model/procedural.h"
 #include "render/cameras.h"
 #include "render/fast.h"
@@ -18,20 +21,9 @@
 namespace edrnr {
 namespace {
 
-SceneModel several_model(int res, bool store_float = true) {
-  ProceduralOptions o;
-  o.micro_res = res;
-  o.store_float = store_float;
-  o.seed = 7;  // pseudo-random unused channels: every feature channel is read
-  return make_procedural_model("several", procedural_shapes("several"), o);
-}
-
-// Views around the scene at several azimuths and elevations, odd sizes so
-// that tiles are cut at the image edges.
-std::vector<Camera> views(int w, int h) {
-  return {orbit_camera(w, h, 0, 30, 4, 50), orbit_camera(w, h, 75, 10, 4.5, 45), orbit_camera(w, h, 200, 60, 4, 50),
-          orbit_camera(w, h, 310, -20, 3.5, 60)};
-}
+using fast_test::expect_reference_samples;
+using fast_test::several_model;
+using fast_test::views;
 
 TEST(Fast, FloatPathMatchesTheReference) {
   const SceneModel m = several_model(128);
@@ -53,31 +45,6 @@ TEST(Fast, FloatPathMatchesTheReference) {
       EXPECT_GT(fs.samples, 1000u);
     }
   }
-}
-
-// Marches every pixel ray of `cam` with both marchers and asserts the same
-// samples; adds the samples seen to *total and raises *k_max to the largest
-// candidate index.
-void expect_reference_samples(const SceneModel& m, const FastSkipGrid& skip, const Camera& cam, float delta,
-                              size_t* total, int64_t* k_max) {
-  for (int y = 0; y < cam.height; ++y)
-    for (int x = 0; x < cam.width; ++x) {
-      const Ray ray = cam.pixel_ray(x, y);
-      const MicroRay mr = make_micro_ray(m, ray, delta);
-      SampleMarcher ref(m, ray, mr, true);
-      FastMarcher fast(m, skip, ray, mr);
-      MarchSample a, b;
-      for (;;) {
-        const bool more = ref.next(a);
-        ASSERT_EQ(fast.next(b), more) << "pixel " << x << "," << y;
-        if (!more) break;
-        ASSERT_EQ(a.k, b.k);
-        ASSERT_EQ(a.voxel, b.voxel);
-        ASSERT_EQ(a.p_micro, b.p_micro);
-        *k_max = std::max(*k_max, a.k);
-        ++*total;
-      }
-    }
 }
 
 // The fast march yields exactly the reference march's samples (same k, same
@@ -102,11 +69,11 @@ TEST(Fast, MarchYieldsTheReferenceSamples) {
 }
 
 // The march's first steps as fast_setup_rays is to make them, written out
-// from the march's rules: from a candidate in an empty fine voxel at
-// distance r >= 3, a jump past the empty cube of fine voxels around it;
-// past a candidate outside the grid, one step; up to a candidate at
-// distance 2 or less (whose vector test is next: dense), or the end. Each
-// distance lookup is an occupancy check.
+// from the march's rules: from a candidate in a fine voxel whose reach e is
+// kFastJumpReach or more, a jump past the empty box of the fine voxel
+// widened by e micro voxels; past a candidate outside the grid, one step;
+// up to a candidate with a shorter reach (whose vector test is next:
+// dense), or the end. Each reach lookup is an occupancy check.
 void approach(FastMarcher::State& st, const SceneModel& m, const FastSkipGrid& skip) {
   const float hi = float(m.micro_res);
   while (st.k <= st.k_end) {
@@ -117,13 +84,13 @@ void approach(FastMarcher::State& st, const SceneModel& m, const FastSkipGrid& s
     }
     const Vec3i f{std::min(int(p.x), m.micro_res - 1) / 4, std::min(int(p.y), m.micro_res - 1) / 4,
                   std::min(int(p.z), m.micro_res - 1) / 4};
-    const int r = skip.at(f.x, f.y, f.z);
+    const int e = skip.reach[size_t(f.x) + size_t(skip.res) * (size_t(f.y) + size_t(skip.res) * size_t(f.z))];
     ++st.checks;
-    if (r <= 2) {
+    if (e < kFastJumpReach) {
       st.dense = true;
       return;
     }
-    st.k = st.skip_box(st.k, Vec3i{4 * (f.x - r + 1), 4 * (f.y - r + 1), 4 * (f.z - r + 1)}, 4 * (2 * r - 1));
+    st.k = st.skip_box(st.k, Vec3i{4 * f.x - e, 4 * f.y - e, 4 * f.z - e}, 4 + 2 * e);
   }
 }
 

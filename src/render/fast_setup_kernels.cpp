@@ -1,0 +1,286 @@
+// Highway kernel of the fast renderer's ray set-up (render/fast_march.h:
+// fast_setup_rays); compiled once per SIMD target (hwy/foreach_target.h) and
+// picked at run time (HWY_DYNAMIC_DISPATCH).
+#include <algorithm>
+#include <cmath>
+
+#include "render/fast_march.h"
+#include "render/fast_march_grid.h"
+
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "render/fast_setup_kernels.cpp"
+// clang-format off
+#include <hwy/foreach_target.h>  // before highway.h
+#include <hwy/highway.h>
+// clang-format on
+
+HWY_BEFORE_NAMESPACE();
+namespace edrnr {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+using fast_march_detail::FineIndex;
+using fast_march_detail::Grid;
+using fast_march_detail::ReachLo;
+using fast_march_detail::VoxelOf;
+
+// std::max and std::min of doubles, lane by lane with their exact semantics
+// (the first operand unless the comparison says otherwise).
+template <class V>
+HWY_INLINE V StdMax(V a, V b) {
+  return hn::IfThenElse(hn::Lt(a, b), b, a);
+}
+template <class V>
+HWY_INLINE V StdMin(V a, V b) {
+  return hn::IfThenElse(hn::Lt(b, a), b, a);
+}
+
+// What SetupRays does in lanes after the set-up, for one marcher: the
+// march's steps (Advance) up to a candidate whose reach is below kFastJumpReach,
+// whose vector test is then left to the march without a second lookup
+// (dense).
+void Approach(FastMarcher::State& st, const Grid& g) {
+  while (st.k <= st.k_end) {
+    Vec3i v;
+    if (!VoxelOf(st.ray.point(st.k), g, v)) {
+      ++st.k;
+      continue;
+    }
+    const int e = g.reach[FineIndex(v, g.fine_res)];
+    ++st.checks;
+    if (e < kFastJumpReach) {
+      st.dense = true;
+      return;
+    }
+    st.k = st.skip_box(st.k, ReachLo(v, e), 4 + 2 * e);
+  }
+}
+
+// A mask of 32-bit lanes as the mask of the 64-bit lanes of the same count.
+template <class DD, class DI32, class M>
+HWY_INLINE auto WidenMask(DD dd, DI32 di32, M m) {
+  const hn::RebindToSigned<DD> di64;
+  return hn::MaskFromVec(hn::BitCast(dd, hn::PromoteTo(di64, hn::VecFromMask(di32, m))));
+}
+
+void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& cam, float delta, const Box3d& aabb,
+               int x0, int y0, int tw, int n, FastMarcher* marchers, float* dx, float* dy, float* dz, bool* hit_aabb) {
+  using DD = hn::ScalableTag<double>;
+  using VD = hn::Vec<DD>;
+  const DD dd;
+  const hn::Rebind<float, DD> dfh;
+  const hn::Rebind<int32_t, DD> di32;
+  using VF = hn::Vec<decltype(dfh)>;
+  using VI = hn::Vec<decltype(di32)>;
+  const int32_t* reach = reinterpret_cast<const int32_t*>(skip.reach.data());  // 32-bit reads at byte offsets
+  const float grid_hi = float(model.micro_res);
+  Grid grid;
+  grid.words = skip.fine_words.data();
+  grid.reach = skip.reach.data();
+  grid.fine_to_block = model.fine_to_block.data();
+  grid.coarse_to_mlp = model.coarse_to_mlp.data();
+  grid.micro_res = model.micro_res;
+  grid.fine_res = skip.res;
+  grid.coarse_res = model.coarse_res();
+  grid.hi = grid_hi;
+  constexpr size_t kMax = HWY_MAX_BYTES / sizeof(double);
+  const size_t L = hn::Lanes(dd);
+  // Per camera and model: the ray origin, its micro-unit form and the
+  // micro scale (make_micro_ray's operations), the boxes relative to it.
+  const Vec3d o = cam.origin();
+  const MicroRay m0 = make_micro_ray(model, Ray{o, Vec3d{0, 0, 1}}, delta);
+  const Vec3d size = model.scene_box.size().cast<double>();
+  const double R = double(model.micro_res);
+  const double mscale[3] = {R / size.x, R / size.y, R / size.z};
+  const double ddelta = double(delta);
+  double rlo[3], rhi[3], alo[3], ahi[3];
+  for (int a = 0; a < 3; ++a) {
+    rlo[a] = skip.region.lo[a] - o[a];
+    rhi[a] = skip.region.hi[a] - o[a];
+    alo[a] = aabb.lo[a] - o[a];
+    ahi[a] = aabb.hi[a] - o[a];
+  }
+  const VD one = hn::Set(dd, 1.0), zero = hn::Zero(dd);
+  const VD c2w_z[3] = {hn::Set(dd, cam.c2w[2] * -1.0), hn::Set(dd, cam.c2w[6] * -1.0), hn::Set(dd, cam.c2w[10] * -1.0)};
+  const VD half = hn::Set(dd, 0.5), vdelta = hn::Set(dd, ddelta);
+  double om[3];  // the micro origin as doubles
+  for (int a = 0; a < 3; ++a) om[a] = double(m0.origin[a]);
+  alignas(64) double u[kMax], v[kMax], dir[3][kMax], exit[3][kMax], scale[3][kMax], offset[3][kMax], kk[3][kMax];
+  alignas(64) double aabb_far[kMax], flags[5][kMax];
+  alignas(64) float dm[3][kMax];
+  for (int r0 = 0; r0 < n; r0 += int(L)) {
+    for (size_t l = 0; l < L; ++l) {
+      const int r = std::min(r0 + int(l), n - 1);
+      u[l] = double(x0 + r % tw) + 0.5;
+      v[l] = double(y0 + r / tw) + 0.5;
+    }
+    // Camera::ray_at: the camera-space direction, rotated, normalized.
+    const VD cx = hn::Div(hn::Sub(hn::Load(dd, u), hn::Set(dd, cam.cx)), hn::Set(dd, cam.fx));
+    const VD cy = hn::Div(hn::Neg(hn::Sub(hn::Load(dd, v), hn::Set(dd, cam.cy))), hn::Set(dd, cam.fy));
+    VD d[3];
+    for (int a = 0; a < 3; ++a)
+      d[a] = hn::Add(hn::Add(hn::Mul(hn::Set(dd, cam.c2w[4 * a]), cx), hn::Mul(hn::Set(dd, cam.c2w[4 * a + 1]), cy)),
+                     c2w_z[a]);
+    const VD len = hn::Sqrt(hn::Add(hn::Add(hn::Mul(d[0], d[0]), hn::Mul(d[1], d[1])), hn::Mul(d[2], d[2])));
+    // Lanes that set_up handles: a zero or tiny component (intersect_box's
+    // special case, or a micro component that rounds to 0).
+    auto special = hn::FirstN(dd, 0);
+    VD tn = hn::Set(dd, -INFINITY), tf = hn::Set(dd, INFINITY);
+    VD an = tn, af = tf;
+    VD dmd[3];
+    VF fdir[3];
+    for (int a = 0; a < 3; ++a) {
+      d[a] = hn::Div(d[a], len);
+      hn::Store(d[a], dd, dir[a]);
+      // make_micro_ray: the direction in micro units, rounded to float.
+      const auto f = hn::DemoteTo(dfh, hn::Mul(d[a], hn::Set(dd, mscale[a])));
+      hn::Store(f, dfh, dm[a]);
+      fdir[a] = f;
+      dmd[a] = hn::PromoteTo(dd, f);
+      special = hn::Or(special, hn::Or(hn::Lt(hn::Abs(d[a]), hn::Set(dd, 0x1p-500)), hn::Eq(dmd[a], zero)));
+      // intersect_box with the region and with the AABB.
+      const VD ia = hn::Div(one, d[a]);
+      VD t0 = hn::Mul(hn::Set(dd, rlo[a]), ia), t1 = hn::Mul(hn::Set(dd, rhi[a]), ia);
+      auto swap = hn::Gt(t0, t1);
+      tn = StdMax(tn, hn::IfThenElse(swap, t1, t0));
+      tf = StdMin(tf, hn::IfThenElse(swap, t0, t1));
+      t0 = hn::Mul(hn::Set(dd, alo[a]), ia);
+      t1 = hn::Mul(hn::Set(dd, ahi[a]), ia);
+      swap = hn::Gt(t0, t1);
+      an = StdMax(an, hn::IfThenElse(swap, t1, t0));
+      af = StdMin(af, hn::IfThenElse(swap, t0, t1));
+    }
+    // FastMarcher::set_up from its box test on, for lanes whose candidate
+    // indices stay below 2^51 (where floor and ceil in doubles equal the
+    // int64 arithmetic there); the others take set_up.
+    const auto valid = hn::And(hn::And(hn::Le(tn, tf), hn::Ge(tf, zero)), hn::And(hn::IsFinite(tf), hn::IsFinite(tn)));
+    const VD first = StdMin(hn::Sub(hn::Div(StdMax(tn, zero), vdelta), half), hn::Set(dd, 4e18));
+    const VD last = StdMin(hn::Sub(hn::Div(tf, vdelta), half), hn::Set(dd, 4e18));
+    special = hn::Or(special, hn::AndNot(hn::Lt(last, hn::Set(dd, 0x1p51)), valid));
+    const VD k = StdMax(zero, hn::Sub(hn::Floor(first), one));
+    const VD k_end = hn::Add(hn::Ceil(last), one);
+    const VD t_max = hn::Mul(hn::Add(k_end, hn::Set(dd, 1.5)), vdelta);
+    VD max_coord = hn::Set(dd, R);
+    for (int a = 0; a < 3; ++a)
+      max_coord = StdMax(max_coord, hn::Add(hn::Set(dd, std::abs(om[a])), hn::Mul(hn::Abs(dmd[a]), t_max)));
+    const VD margin = hn::Mul(max_coord, hn::Set(dd, 1.0 / 524288.0));
+    VD ex_v[3], sc_v[3], of_v[3];
+    for (int a = 0; a < 3; ++a) {
+      const auto up = hn::Gt(dmd[a], zero);
+      sc_v[a] = hn::Div(one, hn::Mul(dmd[a], vdelta));
+      ex_v[a] = hn::IfThenElseZero(up, one);
+      const VD m = hn::IfThenElse(up, hn::Neg(margin), margin);
+      of_v[a] = hn::Sub(hn::Mul(hn::Sub(m, hn::Set(dd, om[a])), sc_v[a]), half);
+      hn::Store(ex_v[a], dd, exit[a]);
+      hn::Store(sc_v[a], dd, scale[a]);
+      hn::Store(of_v[a], dd, offset[a]);
+    }
+    // The march's first steps, in the lanes (Advance): from a fine voxel
+    // whose reach is kFastJumpReach or more a jump past the empty box around it
+    // (FastMarcher::State::skip_box), past a candidate outside the grid one
+    // step, until a candidate with a shorter reach or the end. That
+    // candidate's vector test is left to the march, marked dense so that it
+    // does not look the reach up again.
+    VD kv = k, checks = zero;
+    auto dense = hn::FirstN(dd, 0);
+    // Whether the march has candidates, before the steps (the AABB count's condition).
+    const auto has_candidates = hn::And(valid, hn::Le(k, k_end));
+    auto active = hn::AndNot(special, has_candidates);
+    while (!hn::AllFalse(dd, active)) {
+      const VF kf = hn::DemoteTo(dfh, kv);  // kv is an integer below 2^51: float(int64) rounds the same
+      const VF t = hn::Mul(hn::Add(kf, hn::Set(dfh, 0.5f)), hn::Set(dfh, delta));
+      VI vox[3];
+      auto inside_f = hn::FirstN(dfh, hn::Lanes(dfh));
+      for (int a = 0; a < 3; ++a) {
+        const VF p = hn::Add(hn::Set(dfh, m0.origin[a]), hn::Mul(fdir[a], t));
+        inside_f = hn::And(inside_f, hn::And(hn::Ge(p, hn::Zero(dfh)), hn::Le(p, hn::Set(dfh, grid_hi))));
+        vox[a] = hn::Min(hn::ConvertTo(di32, p), hn::Set(di32, model.micro_res - 1));
+      }
+      const auto inside_i = hn::RebindMask(di32, inside_f);
+      const VI fr = hn::Set(di32, skip.res);
+      const VI fine = hn::Add(hn::ShiftRight<2>(vox[0]),
+                              hn::Mul(fr, hn::Add(hn::ShiftRight<2>(vox[1]), hn::Mul(fr, hn::ShiftRight<2>(vox[2])))));
+      const VI e = hn::And(hn::GatherOffset(di32, reach, hn::IfThenElseZero(inside_i, fine)), hn::Set(di32, 0xFF));
+      const auto far_i = hn::And(inside_i, hn::Gt(e, hn::Set(di32, kFastJumpReach - 1)));
+      // skip_box(k, lo, size): lo = 4 (v >> 2) - e per axis, size = 4 + 2 e.
+      const VD size_d = hn::PromoteTo(dd, hn::Add(hn::Add(e, e), hn::Set(di32, 4)));
+      VD xs[3];
+      for (int a = 0; a < 3; ++a) {
+        const VI lo = hn::Sub(hn::ShiftLeft<2>(hn::ShiftRight<2>(vox[a])), e);
+        xs[a] = hn::Add(hn::Mul(hn::Add(hn::PromoteTo(dd, lo), hn::Mul(size_d, ex_v[a])), sc_v[a]), of_v[a]);
+      }
+      const VD xm = StdMin(xs[0], StdMin(xs[1], xs[2]));
+      const VD floor_x = hn::Floor(StdMax(xm, hn::Set(dd, -4e18)));
+      const VD jump =
+          hn::IfThenElse(hn::Lt(xm, k_end), StdMax(hn::Add(kv, one), hn::Add(floor_x, one)), hn::Add(k_end, one));
+      const auto inside = WidenMask(dd, di32, inside_i);
+      const auto far = hn::And(active, WidenMask(dd, di32, far_i));
+      const auto outside = hn::AndNot(inside, active);
+      kv = hn::IfThenElse(far, jump, hn::IfThenElse(outside, hn::Add(kv, one), kv));
+      const auto stop = hn::AndNot(far, hn::And(active, inside));
+      checks = hn::Add(checks, hn::IfThenElseZero(hn::Or(far, stop), one));
+      dense = hn::Or(dense, stop);
+      active = hn::And(hn::Or(far, outside), hn::Le(kv, k_end));
+    }
+    hn::Store(checks, dd, kk[2]);
+    hn::Store(hn::IfThenElseZero(dense, one), dd, flags[4]);
+    hn::Store(kv, dd, kk[0]);
+    hn::Store(k_end, dd, kk[1]);
+    hn::Store(af, dd, aabb_far);
+    hn::Store(hn::IfThenElseZero(valid, one), dd, flags[0]);
+    hn::Store(hn::IfThenElseZero(has_candidates, one), dd, flags[3]);
+    hn::Store(hn::IfThenElseZero(hn::Le(an, af), one), dd, flags[1]);
+    hn::Store(hn::IfThenElseZero(special, one), dd, flags[2]);
+    const int valid_lanes = std::min(int(L), n - r0);
+    for (int l = 0; l < valid_lanes; ++l) {
+      const int r = r0 + l;
+      FastMarcher& fm = marchers[r];
+      if (flags[2][l] != 0) {
+        const Ray ray = cam.pixel_ray(x0 + r % tw, y0 + r / tw);
+        fm.set_up(model, skip, ray, make_micro_ray(model, ray, delta));
+        const bool had_candidates = !fm.empty();
+        Approach(fm.state(), grid);
+        dx[r] = float(ray.dir.x);
+        dy[r] = float(ray.dir.y);
+        dz[r] = float(ray.dir.z);
+        double t_near, t_far;
+        hit_aabb[r] = had_candidates && intersect_box(ray.origin, ray.dir, aabb, t_near, t_far) && t_far >= 0;
+        continue;
+      }
+      MicroRay mr = m0;
+      mr.dir = Vec3f{dm[0][l], dm[1][l], dm[2][l]};
+      if (flags[0][l] != 0) {
+        const double e[3] = {exit[0][l], exit[1][l], exit[2][l]};
+        const double sc[3] = {scale[0][l], scale[1][l], scale[2][l]};
+        const double of[3] = {offset[0][l], offset[1][l], offset[2][l]};
+        fm.assign(model, skip, mr, int64_t(kk[0][l]), int64_t(kk[1][l]), e, sc, of);
+        fm.state().checks = uint64_t(kk[2][l]);
+        fm.state().dense = flags[4][l] != 0;
+      } else {
+        const double z[3] = {0, 0, 0};
+        fm.assign(model, skip, mr, 0, -1, z, z, z);
+      }
+      dx[r] = float(dir[0][l]);
+      dy[r] = float(dir[1][l]);
+      dz[r] = float(dir[2][l]);
+      hit_aabb[r] = flags[3][l] != 0 && flags[1][l] != 0 && aabb_far[l] >= 0;
+    }
+  }
+}
+
+}  // namespace HWY_NAMESPACE
+}  // namespace edrnr
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace edrnr {
+
+HWY_EXPORT(SetupRays);
+
+void fast_setup_rays(const SceneModel& model, const FastSkipGrid& skip, const Camera& camera, float delta,
+                     const Box3d& aabb, int x0, int y0, int tw, int n, FastMarcher* marchers, float* dx, float* dy,
+                     float* dz, bool* hit_aabb) {
+  HWY_DYNAMIC_DISPATCH(SetupRays)(model, skip, camera, delta, aabb, x0, y0, tw, n, marchers, dx, dy, dz, hit_aabb);
+}
+
+}  // namespace edrnr
+#endif

@@ -1,0 +1,113 @@
+// The fast renderer's batch kernel: how a batch is cut into SIMD vectors does
+// not change any sample's outputs.
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "model/procedural.h"
+#include "render/fast_kernels.h"
+#include "render/fast_model.h"
+#include "render/reference.h"
+
+namespace edrnr {
+namespace {
+
+constexpr int kRays = 256;  // direction table width (a tile's rays)
+
+struct Batch {
+  uint32_t mlp = 0;
+  std::vector<FastSample> samples;
+};
+
+// Samples of the MLP whose coarse voxel holds the most feature blocks: each at
+// a micro voxel of one of its blocks, with pseudo-random trilinear weights,
+// three consecutive samples per ray.
+Batch make_batch(const SceneModel& m, size_t n) {
+  const int fr = m.fine_res(), cr = m.coarse_res(), per = fr / cr;
+  std::vector<std::vector<int32_t>> blocks(m.mlp_count());
+  for (int z = 0; z < fr; ++z)
+    for (int y = 0; y < fr; ++y)
+      for (int x = 0; x < fr; ++x) {
+        const int32_t b = m.fine_to_block[linear_index(x, y, z, fr)];
+        const int32_t u = m.coarse_to_mlp[linear_index(x / per, y / per, z / per, cr)];
+        if (b >= 0 && u >= 0) blocks[size_t(u)].push_back(b);
+      }
+  Batch batch;
+  size_t best = 0;
+  for (size_t u = 0; u < blocks.size(); ++u)
+    if (blocks[u].size() > blocks[best].size()) best = u;
+  batch.mlp = uint32_t(best);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> frac(0.f, 1.f);
+  for (size_t i = 0; i < n; ++i) {
+    FastSample s;
+    s.ray = uint32_t(i / 3);
+    s.mlp = batch.mlp;
+    const int32_t b = blocks[best][i % blocks[best].size()];
+    const int l = int(rng() % 64);  // micro voxel (l & 3, (l >> 2) & 3, l >> 4) of the block
+    s.vertex = uint32_t(b) * kBlockVerts +
+               uint32_t((l & 3) + kBlockVertsPerAxis * (((l >> 2) & 3) + kBlockVertsPerAxis * (l >> 4)));
+    s.fx = frac(rng);
+    s.fy = frac(rng);
+    s.fz = frac(rng);
+    batch.samples.push_back(s);
+  }
+  return batch;
+}
+
+uint32_t bits(float x) { return std::bit_cast<uint32_t>(x); }
+
+// Every run of samples [start, start + len) evaluated as a batch of its own
+// (whose chunks, and short tails in half-width vectors, fall elsewhere) gives
+// each sample the outputs, bit for bit, it had in the whole batch. Int8 and
+// float arithmetic.
+TEST(FastKernels, OutputsDoNotDependOnTheChunking) {
+  ProceduralOptions o;
+  o.micro_res = 64;
+  o.store_float = true;
+  o.seed = 7;
+  const SceneModel m = make_procedural_model("several", procedural_shapes("several"), o);
+  const Batch batch = make_batch(m, 53);
+  ASSERT_GT(m.mlp_count(), 0u);
+  std::vector<float> dx(kRays), dy(kRays), dz(kRays);
+  for (int r = 0; r < kRays; ++r) {
+    const double a = 0.1 * r, b = 0.03 * r - 2.0;
+    dx[size_t(r)] = float(std::cos(a) * std::cos(b));
+    dy[size_t(r)] = float(std::sin(a) * std::cos(b));
+    dz[size_t(r)] = float(std::sin(b));
+  }
+  const float delta = 2.f / 64.f;
+  for (FastArithmetic a : {FastArithmetic::Int8, FastArithmetic::Float}) {
+    const FastModel fm = pack_fast_model(m, resolve_model_form(m, ModelForm::Quantized), a);
+    std::vector<float> dir(size_t(std::max(fm.dir_dims, 1)) * kRays);
+    fast_encode_directions(fm, dx.data(), dy.data(), dz.data(), kRays, dir.data(), kRays);
+    const size_t n = batch.samples.size();
+    std::vector<uint32_t> order(n);
+    for (size_t i = 0; i < n; ++i) order[i] = uint32_t(i);
+    std::vector<FastSampleOut> whole(n);
+    fast_eval_batch(fm, batch.mlp, batch.samples.data(), order.data(), n, dir.data(), kRays, delta, whole.data(),
+                    nullptr);
+    int distinct = 0;  // samples whose outputs differ from the first one's: the batch is not degenerate
+    for (size_t i = 0; i < n; ++i) distinct += whole[i].alpha != whole[0].alpha || whole[i].rgb[0] != whole[0].rgb[0];
+    EXPECT_GT(distinct, int(n) / 2);
+    for (size_t start : {size_t(0), size_t(3), size_t(16), size_t(37)})
+      for (size_t len = 1; len <= 17 && start + len <= n; ++len) {
+        std::vector<FastSampleOut> part(n);
+        fast_eval_batch(fm, batch.mlp, batch.samples.data(), order.data() + start, len, dir.data(), kRays, delta,
+                        part.data(), nullptr);
+        for (size_t i = start; i < start + len; ++i) {
+          SCOPED_TRACE(testing::Message() << "int8 " << (a == FastArithmetic::Int8) << " start " << start << " len "
+                                          << len << " sample " << i);
+          ASSERT_EQ(bits(part[i].alpha), bits(whole[i].alpha));
+          ASSERT_EQ(bits(part[i].trans), bits(whole[i].trans));
+          for (int c = 0; c < 3; ++c) ASSERT_EQ(bits(part[i].rgb[c]), bits(whole[i].rgb[c]));
+        }
+      }
+  }
+}
+
+}  // namespace
+}  // namespace edrnr
