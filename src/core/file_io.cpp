@@ -111,7 +111,8 @@ void replace_regular(const Target& t, const fs::path& given, std::string_view by
   int fd = -1;
   for (int attempt = 0; fd < 0; ++attempt) {
     tmp = t.path;
-    tmp += ".tmp." + std::to_string(::getpid()) + (attempt ? "." + std::to_string(attempt) : "");
+    tmp += fmt::format(".tmp.{}", ::getpid());
+    if (attempt) tmp += fmt::format(".{}", attempt);
     const mode_t mode = t.exists ? (t.st.st_mode & 07777) : 0666;
     fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, mode);
     if (fd < 0 && errno == EINTR) continue;
