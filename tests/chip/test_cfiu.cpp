@@ -57,7 +57,9 @@ TEST(Cfiu, InterpolatesLinearFeaturesExactlyWithEveryBankMapping) {
     s.local = {0, 0, 0};
     cfiu.interpolate(0, s, out);
     EXPECT_EQ(cfiu.counters().conflict_cycles - before, mapping == BankMapping::Linear ? 1u : 0u);
-    if (mapping != BankMapping::Linear) EXPECT_EQ(cfiu.counters().conflict_cycles, 0u);
+    if (mapping != BankMapping::Linear) {
+      EXPECT_EQ(cfiu.counters().conflict_cycles, 0u);
+    }
     s.local = {1, 2, 0};
   }
 }

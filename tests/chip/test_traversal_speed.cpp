@@ -344,7 +344,9 @@ TEST(TraversalSpeed, LfauSelectionMatchesTheStagedComparators) {
         const LfauSelection got = lfau_select(voxel, active, sign, lag_first);
         const LfauSelection want = reference_lfau(voxel, active, sign, lag_first);
         ASSERT_EQ(got.selected_mask, want.selected_mask) << "range " << range << " i " << i;
-        if (active) ASSERT_EQ(got.voxel, want.voxel);
+        if (active) {
+          ASSERT_EQ(got.voxel, want.voxel);
+        }
         ++selections;
       }
     }
