@@ -148,8 +148,11 @@ void run_train(const TrainCmdOptions& o) {
   }
 
   const bool tty = isatty(STDERR_FILENO) != 0;
+  // Messages go to stderr whether or not it is a terminal, so a long run
+  // written to a log file shows where it is; only the live line needs a tty.
   auto say = [&](const std::string& m) {
-    if (tty) fmt::print(stderr, "{}\n", m);
+    fmt::print(stderr, "{}\n", m);
+    std::fflush(stderr);
   };
   DatasetOptions d;
   d.split = cfg.split;
@@ -170,6 +173,7 @@ void run_train(const TrainCmdOptions& o) {
   opt.checkpoint_path = checkpoint_path;
   opt.checkpoint_minutes = o.checkpoint_minutes;
   opt.progress = tty;
+  opt.progress_log_seconds = tty ? 0 : 60;
   opt.stop_after = o.stop_after;
   opt.interrupt = &g_interrupt;
   opt.log = say;

@@ -1492,6 +1492,14 @@ bool Trainer::run(const TrainOptions& options) {
       rate_step = s.step;
       rate_time = now;
     }
+    if (!options.progress && options.progress_log_seconds > 0 &&
+        std::chrono::duration<double>(now - t_print).count() >= options.progress_log_seconds) {
+      t_print = now;
+      const TrainStats st = stats();
+      const double eta = steps_per_s > 0 ? double(st.iters - st.step) / steps_per_s : 0;
+      log(fmt::format("step {}/{}  {:.2f} steps/s  ETA {}:{:02d}  loss {:.5f}  PSNR {:.2f} dB  {}", st.step, st.iters,
+                      steps_per_s, int(eta) / 60, int(eta) % 60, st.loss, st.psnr, phase_name(st.phase)));
+    }
     if (options.progress && std::chrono::duration<double>(now - t_print).count() >= 0.5) {
       t_print = now;
       const TrainStats st = stats();

@@ -38,10 +38,13 @@ enum class Phase : int { Main = 0, PerCv = 1, Quantize = 2, Done = 3 };
 const char* phase_name(Phase p);
 
 struct TrainOptions {
-  int threads = 0;                               // 0: all cores
-  std::filesystem::path checkpoint_path;         // empty: no checkpoints
-  double checkpoint_minutes = 5;                 // between periodic checkpoints
-  bool progress = false;                         // a live progress line on stderr
+  int threads = 0;                        // 0: all cores
+  std::filesystem::path checkpoint_path;  // empty: no checkpoints
+  double checkpoint_minutes = 5;          // between periodic checkpoints
+  bool progress = false;                  // a live progress line on stderr
+  // > 0 (and progress off): a plain progress message through `log` this often,
+  // for runs whose output goes to a file.
+  double progress_log_seconds = 0;
   int64_t stop_after = -1;                       // >= 0: checkpoint and stop once this many steps are done
   const std::atomic<bool>* interrupt = nullptr;  // set (e.g. by SIGINT): checkpoint and stop
   std::function<void(const std::string&)> log;   // one-line messages (phase changes, checkpoints)
