@@ -1,5 +1,10 @@
 #include "sim/batch_worker.h"
 
+#include <fmt/format.h>
+
+#include <stdexcept>
+#include <utility>
+
 namespace edrnr::sim {
 
 using namespace chip;
@@ -125,11 +130,89 @@ FrontEndPacket FrontEndAhead::take() {
   return e;
 }
 
+// ------------------------------------------------------------ FtuAhead
+
+void run_ftu(Ftu& ftu, RayPacket& p, uint32_t rp, uint32_t cv_tag, FtuRun& out) {
+  const FtuCounters before = ftu.counters();
+  out.micro_log.clear();
+  ftu.set_micro_read_log(&out.micro_log);
+  out.has_batch = ftu.run(p, rp, cv_tag, out.batch);
+  ftu.set_micro_read_log(nullptr);
+  const FtuCounters& a = ftu.counters();
+  FtuCounters& d = out.counts;
+  d.iterations = a.iterations - before.iterations;
+  d.rays_advanced = a.rays_advanced - before.rays_advanced;
+  d.fine_checks = a.fine_checks - before.fine_checks;
+  d.micro_word_reads = a.micro_word_reads - before.micro_word_reads;
+  d.micro_word_hits = a.micro_word_hits - before.micro_word_hits;
+  d.leaf_checks = a.leaf_checks - before.leaf_checks;
+  d.micro_checks = a.micro_checks - before.micro_checks;
+  d.candidate_tests = a.candidate_tests - before.candidate_tests;
+  d.samples = a.samples - before.samples;
+  d.batches = a.batches - before.batches;
+  d.position_evals = a.position_evals - before.position_evals;
+}
+
+FtuAhead::FtuAhead(const SceneModel& model, const RayMath& math, bool lag_first, RpBuffer& buffer)
+    : buffer_(buffer), ftu_(model, math, lag_first, 0), slots_(new Slot[size_t(buffer.capacity())]) {}
+
+// The state and queued flags are sequentially consistent: when the engine
+// finds a job still queued after pend(), that job's try_run() comes later in
+// the single order of those operations and so sees the pending run.
+void FtuAhead::pend(uint32_t rp, uint32_t cv_tag) {
+  Slot& s = slots_[rp];
+  s.cv_tag = cv_tag;
+  s.state.store(kPending);
+}
+
+bool FtuAhead::needs_job(uint32_t rp) { return !slots_[rp].queued.exchange(true); }
+
+void FtuAhead::job_started(uint32_t rp) { slots_[rp].queued.store(false); }
+
+void FtuAhead::run_slot(Slot& s, uint32_t rp, Ftu& ftu) {
+  try {
+    run_ftu(ftu, buffer_[rp], rp, s.cv_tag, s.run);
+  } catch (...) {
+    s.error = std::current_exception();
+  }
+  s.state.store(kDone, std::memory_order_release);
+}
+
+void FtuAhead::try_run(uint32_t rp) {
+  Slot& s = slots_[rp];
+  uint8_t expected = kPending;
+  if (s.state.compare_exchange_strong(expected, kRunning)) run_slot(s, rp, ftu_);
+}
+
+FtuRun& FtuAhead::take(uint32_t rp, uint32_t cv_tag, Ftu& ftu) {
+  Slot& s = slots_[rp];
+  uint8_t expected = kPending;
+  if (s.state.compare_exchange_strong(expected, kRunning, std::memory_order_acquire)) {
+    run_slot(s, rp, ftu);
+  } else if (expected == kNone) {
+    throw std::logic_error(fmt::format("cycle simulator: RP {} scheduled with no FTU run pending", rp));
+  } else {
+    // The worker is making it: a run takes microseconds.
+    spin_until([&] { return s.state.load(std::memory_order_acquire) == kDone; }, std::chrono::hours(1));
+  }
+  s.state.store(kNone, std::memory_order_relaxed);
+  if (s.error) std::rethrow_exception(std::exchange(s.error, nullptr));
+  if (s.cv_tag != cv_tag)
+    throw std::logic_error(
+        fmt::format("cycle simulator: RP {} scheduled in CV {}, its FTU run was for CV {}", rp, cv_tag, s.cv_tag));
+  return s.run;
+}
+
 // ------------------------------------------------------------ Worker
 
 Worker::Worker(BatchArithmetic& arithmetic, RpBuffer& buffer, std::vector<Flight>& flights, size_t capacity,
-               FrontEndAhead* ahead)
-    : arithmetic_(arithmetic), buffer_(buffer), flights_(flights), ahead_(ahead), queue_(capacity) {
+               FrontEndAhead* ahead, FtuAhead* ftu_ahead)
+    : arithmetic_(arithmetic),
+      buffer_(buffer),
+      flights_(flights),
+      ahead_(ahead),
+      ftu_ahead_(ftu_ahead),
+      queue_(2 * capacity) {
   thread_ = std::thread([this] { loop(); });
 }
 
@@ -148,13 +231,22 @@ void Worker::signal() {
   signals_.notify_one();
 }
 
-uint64_t Worker::submit(uint32_t rp) {
+// An RP has at most two jobs the worker has not passed (FtuAhead::needs_job
+// keeps one FTU job per RP; the engine waits for an RP's arithmetic job before
+// the RP moves on), so the ring of twice the RPs never overflows.
+uint64_t Worker::push(Job job) {
   const uint64_t seq = submitted_.load();
-  queue_[seq % queue_.size()] = rp;
+  if (seq - completed_.load() >= queue_.size())
+    throw std::logic_error(fmt::format("cycle simulator: more than {} jobs queued for the worker", queue_.size()));
+  queue_[seq % queue_.size()] = job;
   submitted_.store(seq + 1);
   signal();
   return seq;
 }
+
+uint64_t Worker::submit(uint32_t rp) { return push({rp, false}); }
+
+void Worker::submit_ftu(uint32_t rp) { push({rp, true}); }
 
 void Worker::main_wait(const std::atomic<uint64_t>& counter, uint64_t above) {
   if (spin_until([&] { return counter.load() > above; }, kMainSpin)) return;
@@ -212,14 +304,29 @@ void Worker::loop() {
       continue;
     }
     if (submitted_.load() == next) continue;
-    const uint32_t rp = queue_[next % queue_.size()];
+    const Job job = queue_[next % queue_.size()];
+    if (job.ftu) {
+      ftu_ahead_->job_started(job.rp);
+      ftu_ahead_->try_run(job.rp);  // a run's failure is rethrown by FtuAhead::take
+      completed_.store(++next);
+      continue;
+    }
+    bool next_run = false;
     try {
-      if (!error_) arithmetic_.run(buffer_[rp], flights_[rp]);
+      if (!error_) {
+        Flight& f = flights_[job.rp];
+        arithmetic_.run(buffer_[job.rp], f);
+        if (ftu_ahead_ && f.stay) {
+          ftu_ahead_->pend(job.rp, f.cv_tag);
+          next_run = true;
+        }
+      }
     } catch (...) {
       fail_with(std::current_exception());
     }
     completed_.store(++next);
     if (main_sleeping_.load()) completed_.notify_one();
+    if (next_run) ftu_ahead_->try_run(job.rp);
   }
 }
 

@@ -4,13 +4,15 @@
 //   BatchArithmetic  a batch's interpolation sums, MLP and compositing;
 //   FrontEndAhead    the front end's ray packets, built in ZORG order ahead
 //                    of the cycle at which the front end takes them;
-//   Worker           a thread that runs both, batch jobs in submission order.
+//   FtuAhead         FTU runs made as soon as their input is final;
+//   Worker           a thread that runs them, batch jobs in submission order.
 // The engine keeps every timing decision: it only reads results computed
 // here, which are the same whichever thread computed them.
 #include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <exception>
+#include <memory>
 #include <thread>
 #include <vector>
 
@@ -18,6 +20,7 @@
 #include "chip/chip.h"
 #include "chip/chip_ray.h"
 #include "chip/front_end.h"
+#include "chip/ftu.h"
 #include "chip/oo_si.h"
 #include "chip/rp_buffer.h"
 #include "chip/tme.h"
@@ -111,19 +114,78 @@ class FrontEndAhead {
   uint64_t consumed_ = 0;                     // consumer's own count
 };
 
+// One FTU run (Ftu::run of an RP in one CV) with what the timing shell needs
+// from it: the batch, the run's own counters and the fine voxels whose
+// micro-grid words it read, in order.
+struct FtuRun {
+  bool has_batch = false;
+  chip::SampleBatch batch;
+  chip::FtuCounters counts;  // micro_word_hits stays 0: the engine replays micro_log through its LRU tags
+  std::vector<uint32_t> micro_log;
+};
+
+// Runs `ftu` (whose micro-grid LRU must have no capacity) once into `out`.
+void run_ftu(chip::Ftu& ftu, chip::RayPacket& p, uint32_t rp, uint32_t cv_tag, FtuRun& out);
+
+// With two threads, an RP's next FTU run is made as soon as its rays are
+// final for it (the CTU found its next CV, or a batch ended with a live ray
+// still in the CV), by whichever thread gets to it first: the worker, or the
+// engine when it schedules the RP. The run reads and writes that RP's rays
+// alone, so its result is the same whoever makes it and whenever.
+class FtuAhead {
+ public:
+  FtuAhead(const SceneModel& model, const chip::RayMath& math, bool lag_first, chip::RpBuffer& buffer);
+
+  // Either thread: rp's run in CV cv_tag may be made (none of rp's is pending).
+  void pend(uint32_t rp, uint32_t cv_tag);
+  // Engine, after pend(rp): whether the worker needs a job for rp's run
+  // (false while a job of rp's that it has not started is queued: that job
+  // makes whatever run is pending when it starts). This bounds the jobs
+  // queued per RP to one, however often the RP changes CV meanwhile.
+  bool needs_job(uint32_t rp);
+  // Worker: the job of rp started (needs_job(rp) is true again).
+  void job_started(uint32_t rp);
+  // Worker: makes rp's run with the worker's FTU unless someone started it.
+  void try_run(uint32_t rp);
+  // Engine: rp's run in cv_tag, made now with `ftu` if nobody started it,
+  // else waited for. Rethrows what the run threw. Valid until pend(rp).
+  FtuRun& take(uint32_t rp, uint32_t cv_tag, chip::Ftu& ftu);
+
+ private:
+  enum : uint8_t { kNone, kPending, kRunning, kDone };
+  struct Slot {
+    std::atomic<uint8_t> state{kNone};
+    std::atomic<bool> queued{false};  // a job for this RP's run is queued and not started
+    uint32_t cv_tag = 0;
+    FtuRun run;
+    std::exception_ptr error;
+  };
+  void run_slot(Slot& slot, uint32_t rp, chip::Ftu& ftu);
+
+  chip::RpBuffer& buffer_;
+  chip::Ftu ftu_;                  // the worker's
+  std::unique_ptr<Slot[]> slots_;  // by RP pointer
+};
+
 // Runs BatchArithmetic jobs in order on a second thread and, between them,
-// builds front-end packets ahead (when given a FrontEndAhead). Each side
+// builds front-end packets ahead (when given a FrontEndAhead) and makes FTU
+// runs ahead (when given an FtuAhead). Each side
 // spins before it sleeps, and wakes the other only when that one sleeps, so
 // that a job costs no system call while both are busy.
 class Worker {
  public:
+  // capacity: RPs in flight (each has at most two jobs queued: one FTU job,
+  // one arithmetic job that the engine waits for before the RP moves on).
   Worker(BatchArithmetic& arithmetic, chip::RpBuffer& buffer, std::vector<Flight>& flights, size_t capacity,
-         FrontEndAhead* ahead);
+         FrontEndAhead* ahead, FtuAhead* ftu_ahead);
   ~Worker();
 
-  // Queues the job of RP `rp` (at most `capacity` jobs outstanding); returns
-  // its sequence number.
+  // Queues the arithmetic job of RP `rp`; returns its sequence number. With
+  // an FtuAhead, a job whose RP stays in its CV pends and makes its next FTU
+  // run after it completes.
   uint64_t submit(uint32_t rp);
+  // Queues a job for rp's pending FTU run (FtuAhead::pend, needs_job first).
+  void submit_ftu(uint32_t rp);
   // Waits until job `seq` is done (its results are then visible). Rethrows
   // an exception a job threw.
   void wait(uint64_t seq);
@@ -140,8 +202,15 @@ class Worker {
   BatchArithmetic& arithmetic_;
   chip::RpBuffer& buffer_;
   std::vector<Flight>& flights_;
+  struct Job {
+    uint32_t rp = 0;
+    bool ftu = false;  // an FTU run, else the arithmetic of rp's batch
+  };
+  uint64_t push(Job job);
+
   FrontEndAhead* ahead_;
-  std::vector<uint32_t> queue_;
+  FtuAhead* ftu_ahead_;
+  std::vector<Job> queue_;
   std::atomic<uint64_t> submitted_{0}, completed_{0};
   std::atomic<uint64_t> signals_{0};  // bumped by the main thread to wake the sleeping worker
   std::atomic<bool> stop_{false}, worker_sleeping_{false}, main_sleeping_{false};

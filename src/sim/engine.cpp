@@ -36,7 +36,8 @@ Engine::Engine(const SceneModel& model, const Camera& camera, const SimConfig& c
       rob_(RpRobConfig{config.chip.rp_rob.entries, config.chip.rp_rob.entry_depth, config.chip.rp_rob.recent_tags,
                        config.chip.switches.rp_reorder, config.chip.rp_rob.tag_switch,
                        config.chip.rp_rob.switch_when_idle}),
-      ftu_(model, math_, config.chip.switches.lag_first, size_t(config.chip.micro_grid_cache_bytes / 8)),
+      ftu_(model, math_, config.chip.switches.lag_first, 0),
+      micro_lru_(size_t(config.chip.micro_grid_cache_bytes / 8)),
       ooo_(config.chip.ooo_queue_depth, config.chip.switches.ooo_issue),
       cfiu_(model, n_,
             FeatureCacheConfig{feature_cache_lines(config.chip, model.feature_channels), config.chip.mshr_entries,
@@ -69,7 +70,6 @@ Engine::Engine(const SceneModel& model, const Camera& camera, const SimConfig& c
     fail("chip config: the feature cache's {} lines must outnumber the {} OoO-SI entries that reserve them",
          cfiu_.cache().lines(), config.chip.ooo_queue_depth);
   for (uint32_t i = 0; i < uint32_t(batches_.size()); ++i) free_slots_.push_back(i);
-  ftu_.set_micro_read_log(&micro_log_);
   front_.set_encode_directions(false);  // the batch arithmetic encodes (on its thread with threads = 2)
   mem_.set_request_observer(options.dram_request_observer);
   mlp_lines_ = ceil_div(mlp_bytes_, cfg_.memory.mlp_cache.line_bytes);
@@ -88,7 +88,8 @@ Engine::Engine(const SceneModel& model, const Camera& camera, const SimConfig& c
   tme_cycles_per_sample_ = std::max<uint64_t>(1, ceil_div(macs, uint64_t(t_.tme_macs_per_cycle)));
   if (options.threads > 1) {
     ahead_ = std::make_unique<FrontEndAhead>(zorg_, front_, vru_, kFrontEndAheadPackets);
-    worker_ = std::make_unique<Worker>(arithmetic_, buffer_, flights_, rp_capacity_, ahead_.get());
+    ftu_ahead_ = std::make_unique<FtuAhead>(model, math_, config.chip.switches.lag_first, buffer_);
+    worker_ = std::make_unique<Worker>(arithmetic_, buffer_, flights_, rp_capacity_, ahead_.get(), ftu_ahead_.get());
   }
 }
 
@@ -221,6 +222,10 @@ inline void Engine::step_ctu() {
       const uint32_t rp = in->pop(c);
       const CtuCounters before = ctu_.counters();
       ctu_s_.result = ctu_.run(buffer_[rp]);
+      if (ftu_ahead_ && ctu_s_.result.found) {  // the RP's rays are final for its first FTU run in the CV
+        ftu_ahead_->pend(rp, ctu_s_.result.cv_tag);
+        if (ftu_ahead_->needs_job(rp)) worker_->submit_ftu(rp);
+      }
       const CtuCounters& after = ctu_.counters();
       const uint64_t cycles = (after.iterations - before.iterations) * uint64_t(t_.ctu_cycles_per_iteration);
       ctu_s_.rp = rp;
@@ -274,17 +279,24 @@ inline void Engine::step_ftu() {
       s.rp = sched->rp;
       s.slot = free_slots_.back();
       free_slots_.pop_back();
-      micro_log_.clear();
-      const FtuCounters before = ftu_.counters();
-      s.has_batch = ftu_.run(buffer_[sched->rp], sched->rp, sched->tag, batches_[s.slot]);
-      const FtuCounters& after = ftu_.counters();
-      const uint64_t lane_cycles =
-          after.leaf_checks - before.leaf_checks + after.candidate_tests - before.candidate_tests;
-      const uint64_t cycles = (after.iterations - before.iterations) * uint64_t(t_.ftu_cycles_per_iteration) +
-                              ceil_div(lane_cycles, uint64_t(t_.ftu_lanes));
+      FtuRun* run = &ftu_run_;
+      if (ftu_ahead_)
+        run = &ftu_ahead_->take(sched->rp, sched->tag, ftu_);
+      else
+        run_ftu(ftu_, buffer_[sched->rp], sched->rp, sched->tag, ftu_run_);
+      s.has_batch = run->has_batch;
+      std::swap(batches_[s.slot], run->batch);
+      const FtuCounters& d = run->counts;
+      ftu_counts_ += d;
+      const uint64_t cycles = d.iterations * uint64_t(t_.ftu_cycles_per_iteration) +
+                              ceil_div(d.leaf_checks + d.candidate_tests, uint64_t(t_.ftu_lanes));
       s.end = c + std::max<uint64_t>(1, cycles);
       s.reads.clear();
-      for (uint32_t f : micro_log_) s.reads.push_back(map_.micro_word(uint32_t(model_.fine_to_block[f])));
+      // The micro-grid bitmap cache's hits, counted in the order the runs are scheduled.
+      for (uint32_t f : run->micro_log) {
+        ftu_counts_.micro_word_hits += micro_lru_.access(f);
+        s.reads.push_back(map_.micro_word(uint32_t(model_.fine_to_block[f])));
+      }
       s.next_read = 0;
       s.ready = c;
       s.holding = true;

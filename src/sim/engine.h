@@ -15,6 +15,7 @@
 
 #include "chip/chip_ray.h"
 #include "chip/front_end.h"
+#include "chip/lru_tags.h"
 #include "chip/rp_buffer.h"
 #include "chip/zorg.h"
 #include "sim/batch_worker.h"
@@ -227,7 +228,10 @@ class Engine {
   RpBuffer buffer_;
   Ctu ctu_;
   RpRob rob_;
-  Ftu ftu_;
+  Ftu ftu_;                 // the engine's FTU model (its micro-grid LRU has no capacity: micro_lru_ counts)
+  LruTags micro_lru_;       // the micro-grid bitmap cache's tags, for FtuCounters::micro_word_hits
+  FtuCounters ftu_counts_;  // every FTU run's counters, whichever thread made it
+  FtuRun ftu_run_;          // with one thread: the run the FTU makes now
   OooSi ooo_;
   Cfiu cfiu_;
   BatchArithmetic arithmetic_;
@@ -249,10 +253,10 @@ class Engine {
   std::vector<uint32_t> free_slots_;
   std::vector<Flight> flights_;     // by RP pointer
   std::vector<uint64_t> sequence_;  // by RP pointer: ZORG issue index
-  std::vector<uint32_t> micro_log_;
   std::vector<MemoryCompletion> completions_;
   std::vector<uint64_t> retry_micro_, retry_mlp_;
   std::unique_ptr<FrontEndAhead> ahead_;  // with threads = 2: the front end runs on the worker
+  std::unique_ptr<FtuAhead> ftu_ahead_;   // with threads = 2: FTU runs made as soon as their input is final
   std::unique_ptr<Worker> worker_;
 
   FrontEndShell fe_;

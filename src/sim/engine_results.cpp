@@ -24,6 +24,7 @@ void Engine::count_per_access(AccessCount& a, bool hit, size_t samples) {
 ChipCounters Engine::chip_counters() const {
   ChipCounters c =
       unit_counters({zorg_, front_, ctu_, ftu_, rob_, ooo_, cfiu_, arithmetic_.tme(), arithmetic_.vru(), buffer_});
+  c.ftu = ftu_counts_;
   c.packets_dropped = packets_dropped_;
   c.cv_transitions = cv_transitions_;
   c.fine_reschedules = fine_reschedules_;
