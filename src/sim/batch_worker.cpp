@@ -212,7 +212,8 @@ Worker::Worker(BatchArithmetic& arithmetic, RpBuffer& buffer, std::vector<Flight
       flights_(flights),
       ahead_(ahead),
       ftu_ahead_(ftu_ahead),
-      queue_(2 * capacity) {
+      queue_(capacity),
+      ftu_queue_(capacity) {
   thread_ = std::thread([this] { loop(); });
 }
 
@@ -231,22 +232,27 @@ void Worker::signal() {
   signals_.notify_one();
 }
 
-// An RP has at most two jobs the worker has not passed (FtuAhead::needs_job
-// keeps one FTU job per RP; the engine waits for an RP's arithmetic job before
-// the RP moves on), so the ring of twice the RPs never overflows.
-uint64_t Worker::push(Job job) {
+// Each queue holds at most one job per RP in flight: the engine waits for an
+// RP's arithmetic job before the RP moves on, and FtuAhead::needs_job keeps
+// one FTU job per RP. A full queue is a logic error, not a wait.
+uint64_t Worker::submit(uint32_t rp) {
   const uint64_t seq = submitted_.load();
   if (seq - completed_.load() >= queue_.size())
-    throw std::logic_error(fmt::format("cycle simulator: more than {} jobs queued for the worker", queue_.size()));
-  queue_[seq % queue_.size()] = job;
+    throw std::logic_error(fmt::format("cycle simulator: more than {} batch jobs queued", queue_.size()));
+  queue_[seq % queue_.size()] = rp;
   submitted_.store(seq + 1);
   signal();
   return seq;
 }
 
-uint64_t Worker::submit(uint32_t rp) { return push({rp, false}); }
-
-void Worker::submit_ftu(uint32_t rp) { push({rp, true}); }
+void Worker::submit_ftu(uint32_t rp) {
+  const uint64_t seq = ftu_submitted_.load();
+  if (seq - ftu_started_.load() >= ftu_queue_.size())
+    throw std::logic_error(fmt::format("cycle simulator: more than {} FTU jobs queued", ftu_queue_.size()));
+  ftu_queue_[seq % ftu_queue_.size()] = rp;
+  ftu_submitted_.store(seq + 1);
+  signal();
+}
 
 void Worker::main_wait(const std::atomic<uint64_t>& counter, uint64_t above) {
   if (spin_until([&] { return counter.load() > above; }, kMainSpin)) return;
@@ -282,7 +288,10 @@ FrontEndPacket Worker::take_packet() {
 
 void Worker::loop() {
   uint64_t next = 0;
-  auto has_work = [&] { return stop_.load() || submitted_.load() != next || (ahead_ && ahead_->can_produce()); };
+  auto has_work = [&] {
+    return stop_.load() || submitted_.load() != next || ftu_submitted_.load() != ftu_started_.load() ||
+           (ahead_ && ahead_->can_produce());
+  };
   for (;;) {
     const uint64_t seen = signals_.load();
     if (!has_work() && !spin_until(has_work, kWorkerSpin)) {
@@ -292,8 +301,11 @@ void Worker::loop() {
       continue;
     }
     if (stop_.load()) return;
-    // Packets first while the engine's supply runs low, else jobs first.
-    if (ahead_ && ahead_->can_produce() && (ahead_->running_low() || submitted_.load() == next)) {
+    const bool jobs = submitted_.load() != next, ftu_jobs = ftu_submitted_.load() != ftu_started_.load();
+    // Packets first while the engine's supply runs low; then FTU runs (the
+    // FTU may take one within cycles of its CTU run), batch jobs (wanted when
+    // the batch leaves the VRU) and packets.
+    if (ahead_ && ahead_->can_produce() && (ahead_->running_low() || (!jobs && !ftu_jobs))) {
       try {
         if (!error_) ahead_->produce_one();
       } catch (...) {
@@ -303,21 +315,23 @@ void Worker::loop() {
       if (main_sleeping_.load()) ahead_->produced().notify_one();
       continue;
     }
-    if (submitted_.load() == next) continue;
-    const Job job = queue_[next % queue_.size()];
-    if (job.ftu) {
-      ftu_ahead_->job_started(job.rp);
-      ftu_ahead_->try_run(job.rp);  // a run's failure is rethrown by FtuAhead::take
-      completed_.store(++next);
+    if (ftu_jobs) {
+      const uint64_t seq = ftu_started_.load();
+      const uint32_t rp = ftu_queue_[seq % ftu_queue_.size()];
+      ftu_started_.store(seq + 1);
+      ftu_ahead_->job_started(rp);
+      ftu_ahead_->try_run(rp);  // a run's failure is rethrown by FtuAhead::take
       continue;
     }
+    if (!jobs) continue;
+    const uint32_t rp = queue_[next % queue_.size()];
     bool next_run = false;
     try {
       if (!error_) {
-        Flight& f = flights_[job.rp];
-        arithmetic_.run(buffer_[job.rp], f);
+        Flight& f = flights_[rp];
+        arithmetic_.run(buffer_[rp], f);
         if (ftu_ahead_ && f.stay) {
-          ftu_ahead_->pend(job.rp, f.cv_tag);
+          ftu_ahead_->pend(rp, f.cv_tag);
           next_run = true;
         }
       }
@@ -326,7 +340,7 @@ void Worker::loop() {
     }
     completed_.store(++next);
     if (main_sleeping_.load()) completed_.notify_one();
-    if (next_run) ftu_ahead_->try_run(job.rp);
+    if (next_run) ftu_ahead_->try_run(rp);
   }
 }
 

@@ -174,8 +174,7 @@ class FtuAhead {
 // that a job costs no system call while both are busy.
 class Worker {
  public:
-  // capacity: RPs in flight (each has at most two jobs queued: one FTU job,
-  // one arithmetic job that the engine waits for before the RP moves on).
+  // capacity: RPs in flight.
   Worker(BatchArithmetic& arithmetic, chip::RpBuffer& buffer, std::vector<Flight>& flights, size_t capacity,
          FrontEndAhead* ahead, FtuAhead* ftu_ahead);
   ~Worker();
@@ -202,15 +201,11 @@ class Worker {
   BatchArithmetic& arithmetic_;
   chip::RpBuffer& buffer_;
   std::vector<Flight>& flights_;
-  struct Job {
-    uint32_t rp = 0;
-    bool ftu = false;  // an FTU run, else the arithmetic of rp's batch
-  };
-  uint64_t push(Job job);
-
   FrontEndAhead* ahead_;
   FtuAhead* ftu_ahead_;
-  std::vector<Job> queue_;
+  std::vector<uint32_t> queue_;      // batch jobs: RP pointers
+  std::vector<uint32_t> ftu_queue_;  // FTU jobs: RP pointers
+  std::atomic<uint64_t> ftu_submitted_{0}, ftu_started_{0};
   std::atomic<uint64_t> submitted_{0}, completed_{0};
   std::atomic<uint64_t> signals_{0};  // bumped by the main thread to wake the sleeping worker
   std::atomic<bool> stop_{false}, worker_sleeping_{false}, main_sleeping_{false};
