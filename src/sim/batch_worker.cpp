@@ -235,24 +235,20 @@ void Worker::signal() {
 // Each queue holds at most one job per RP in flight: the engine waits for an
 // RP's arithmetic job before the RP moves on, and FtuAhead::needs_job keeps
 // one FTU job per RP. A full queue is a logic error, not a wait.
-uint64_t Worker::submit(uint32_t rp) {
-  const uint64_t seq = submitted_.load();
-  if (seq - completed_.load() >= queue_.size())
-    throw std::logic_error(fmt::format("cycle simulator: more than {} batch jobs queued", queue_.size()));
-  queue_[seq % queue_.size()] = rp;
-  submitted_.store(seq + 1);
+uint64_t Worker::push(std::vector<uint32_t>& queue, std::atomic<uint64_t>& submitted,
+                      const std::atomic<uint64_t>& taken, uint32_t rp, const char* what) {
+  const uint64_t seq = submitted.load();
+  if (seq - taken.load() >= queue.size())
+    throw std::logic_error(fmt::format("cycle simulator: more than {} {} jobs queued", queue.size(), what));
+  queue[seq % queue.size()] = rp;
+  submitted.store(seq + 1);
   signal();
   return seq;
 }
 
-void Worker::submit_ftu(uint32_t rp) {
-  const uint64_t seq = ftu_submitted_.load();
-  if (seq - ftu_started_.load() >= ftu_queue_.size())
-    throw std::logic_error(fmt::format("cycle simulator: more than {} FTU jobs queued", ftu_queue_.size()));
-  ftu_queue_[seq % ftu_queue_.size()] = rp;
-  ftu_submitted_.store(seq + 1);
-  signal();
-}
+uint64_t Worker::submit(uint32_t rp) { return push(queue_, submitted_, completed_, rp, "batch"); }
+
+void Worker::submit_ftu(uint32_t rp) { push(ftu_queue_, ftu_submitted_, ftu_started_, rp, "FTU"); }
 
 void Worker::main_wait(const std::atomic<uint64_t>& counter, uint64_t above) {
   if (spin_until([&] { return counter.load() > above; }, kMainSpin)) return;

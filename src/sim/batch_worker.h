@@ -194,6 +194,10 @@ class Worker {
  private:
   void loop();
   void signal();
+  // Appends rp to a job ring (`taken`: the jobs the worker has started or
+  // done) and wakes the worker; returns the job's sequence number.
+  uint64_t push(std::vector<uint32_t>& queue, std::atomic<uint64_t>& submitted, const std::atomic<uint64_t>& taken,
+                uint32_t rp, const char* what);
   void main_wait(const std::atomic<uint64_t>& counter, uint64_t above);
   void fail_with(std::exception_ptr e);  // worker: records a job's exception
   void rethrow_failure() const;          // main: rethrows it, if any
