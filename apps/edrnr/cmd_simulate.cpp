@@ -5,15 +5,18 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "commands.h"
@@ -162,6 +165,14 @@ struct ProgressLine {
 
 void run_simulate(const SimulateOptions& o) {
   if (o.threads < 1 || o.threads > 2) fail("--threads {}: must be 1 or 2", o.threads);
+  // Two threads hand work to each other thousands of times a frame; on cores
+  // kept busy by other work each hand-over waits for the scheduler.
+  const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+  if (double load[1]; o.threads == 2 && getloadavg(load, 1) == 1 && load[0] > double(cores))
+    std::fprintf(stderr,
+                 "edrnr: warning: load average %.1f on %u cores: --threads 2 can be many times slower than 1 on busy "
+                 "cores\n",
+                 load[0], cores);
   if (o.width_opt->count() || o.height_opt->count())
     limits::check_image_size(o.width_opt->count() ? o.width : 800,
                              o.height_opt->count() ? o.height : (o.width_opt->count() ? o.width : 800),
