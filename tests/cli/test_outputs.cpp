@@ -195,6 +195,19 @@ TEST_F(Outputs, TrainingRefusesOutputsThatCollide) {
   EXPECT_FALSE(fs::exists(dir_ / "m2.edrnr.ckpt"));
 }
 
+// A run logged to a file says what it does (it printed nothing but the final
+// summary when stderr was not a terminal): loading, then each phase change.
+TEST_F(Outputs, TrainingLogsItsStepsWhenStderrIsAFile) {
+  const std::string data = dataset();
+  const fs::path m = dir_ / "logged.edrnr";
+  const RunResult r = run("train " + data + " -o " + m.string() + " --iters 12 --threads 1 --config " + tiny_config());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("loading " + data), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find(": per-CV phase ("), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find(": quantize phase ("), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find('\r'), std::string::npos) << "no live progress line in a file";
+}
+
 // --config may be repeated: each file's keys override the one before, the
 // keys a file does not set are kept, and a bad key names its file.
 TEST_F(Outputs, RepeatedConfigsApplyInOrder) {
