@@ -68,6 +68,21 @@ struct FtuCounters {
     position_evals += o.position_evals;
     return *this;
   }
+  // The counts since an earlier reading `o` of the same instance.
+  FtuCounters& operator-=(const FtuCounters& o) {
+    iterations -= o.iterations;
+    rays_advanced -= o.rays_advanced;
+    fine_checks -= o.fine_checks;
+    micro_word_reads -= o.micro_word_reads;
+    micro_word_hits -= o.micro_word_hits;
+    leaf_checks -= o.leaf_checks;
+    micro_checks -= o.micro_checks;
+    candidate_tests -= o.candidate_tests;
+    samples -= o.samples;
+    batches -= o.batches;
+    position_evals -= o.position_evals;
+    return *this;
+  }
 };
 static_assert(sizeof(FtuCounters) == 11 * sizeof(uint64_t), "FtuCounters::operator+= must add every counter");
 

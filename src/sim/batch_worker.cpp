@@ -138,19 +138,8 @@ void run_ftu(Ftu& ftu, RayPacket& p, uint32_t rp, uint32_t cv_tag, FtuRun& out) 
   ftu.set_micro_read_log(&out.micro_log);
   out.has_batch = ftu.run(p, rp, cv_tag, out.batch);
   ftu.set_micro_read_log(nullptr);
-  const FtuCounters& a = ftu.counters();
-  FtuCounters& d = out.counts;
-  d.iterations = a.iterations - before.iterations;
-  d.rays_advanced = a.rays_advanced - before.rays_advanced;
-  d.fine_checks = a.fine_checks - before.fine_checks;
-  d.micro_word_reads = a.micro_word_reads - before.micro_word_reads;
-  d.micro_word_hits = a.micro_word_hits - before.micro_word_hits;
-  d.leaf_checks = a.leaf_checks - before.leaf_checks;
-  d.micro_checks = a.micro_checks - before.micro_checks;
-  d.candidate_tests = a.candidate_tests - before.candidate_tests;
-  d.samples = a.samples - before.samples;
-  d.batches = a.batches - before.batches;
-  d.position_evals = a.position_evals - before.position_evals;
+  out.counts = ftu.counters();
+  out.counts -= before;
 }
 
 FtuAhead::FtuAhead(const SceneModel& model, const RayMath& math, bool lag_first, RpBuffer& buffer)
