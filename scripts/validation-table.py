@@ -11,8 +11,8 @@ import sys
 from collections import OrderedDict
 
 # The figures a parameter was fitted to; every other figure is validation
-# (power at 380 MHz follows from the fitted energy and the simulated FPS).
-FITTED = {("table1", "energy at 380 MHz"): "fitted (core_cycle)", ("table2", "energy efficiency"): "fitted (core_cycle)"}
+# (energy per pixel at 380 MHz follows from the fitted power and the simulated FPS).
+FITTED = {("table1", "power at 380 MHz"): "fitted (core_cycle)", ("table2", "power"): "fitted (core_cycle)"}
 SKIP = {"table1": ("SRAM",), "table2": ()}
 
 
