@@ -1,6 +1,7 @@
 #pragma once
 // Trainer settings: every field a preset (configs/train/*.yaml) may set, with
-// its default. Durations are in training steps unless the name says otherwise.
+// its default; the defaults are configs/train/default.yaml. Durations are in
+// training steps unless the name says otherwise.
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -32,7 +33,7 @@ struct TrainConfig {
   int64_t plan_step = 1000;       // the learning rate holds until this step; --minutes fixes iters here (or
                                   // earlier, once a quarter of the budget is spent) from the speed measured
                                   // over the last 40 % of the steps, when empty space is already skipped
-  float per_cv_fraction = 0.1f;   // share of steps training per-CV MLPs in float
+  float per_cv_fraction = 0.3f;   // share of steps training per-CV MLPs in float
   float qat_fraction = 0.1f;      // share of steps of quantization-aware training (last)
   int64_t batch_samples = 65536;  // target samples evaluated per step
   int max_rays = 16384;           // rays per step, at most
@@ -44,12 +45,12 @@ struct TrainConfig {
   float lr_final = 0.05f;   // the learning rate decays exponentially to this factor at the last step
   int64_t lr_warmup = 100;  // linear warm-up steps
   float adam_beta1 = 0.9f, adam_beta2 = 0.99f, adam_eps = 1e-15f;
-  float tv_weight = 0.f;          // total variation on the pyramid's finest levels (main phase)
-  int tv_levels = 1;              // how many of the finest levels tv_weight applies to
-  float block_tv_weight = 0.f;    // total variation on the feature blocks, copies across faces included (later phases)
-  float distortion_weight = 0.f;  // distortion loss per ray (train/volume.h), distances in scene-box edges
-  float mlp_tie_weight = 0.f;     // per-CV phases: squared distance of each MLP's weights to the MLPs' mean
-  float init_features = 1e-4f;    // initial feature values: uniform in +-this
+  float tv_weight = 0.f;        // total variation on the pyramid's finest levels (main phase)
+  int tv_levels = 1;            // how many of the finest levels tv_weight applies to
+  float block_tv_weight = 0.f;  // total variation on the feature blocks, copies across faces included (later phases)
+  float distortion_weight = 0.01f;  // distortion loss per ray (train/volume.h), distances in scene-box edges
+  float mlp_tie_weight = 0.f;       // per-CV phases: squared distance of each MLP's weights to the MLPs' mean
+  float init_features = 1e-4f;      // initial feature values: uniform in +-this
 
   // --- occupancy ---
   int occupancy_every = 16;       // steps between partial refreshes (one of 8 parts each)
