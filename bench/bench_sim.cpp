@@ -12,13 +12,11 @@
 //   bench_sim --benchmark_filter='BM_Simulate/frame:0/|BM_Reference/frame:0'   # lego
 //   bench_sim --benchmark_filter='BM_Simulate/frame:[0-3]/threads:1|BM_Simulate/frame:0/threads:2|BM_Reference'
 //   bench_sim --benchmark_filter=MemorySystem
-// Last figures (CPU s, one thread, docs/simulator.md "Host speed", a machine
-// under heavy load): lego 2.9-3.0 (2.1-2.2x the reference renderer's 1.35-1.4
-// in the same run), mic 2.0, procedural 800x800 6.5-6.6, 200x200 0.79; lego on
-// two threads: 2.5-2.6 s on the timing thread (wall time not measured on an
-// idle machine yet: run
-//   bench_sim --benchmark_filter='BM_Simulate/frame:0/threads:[12]|BM_Reference/frame:0' --benchmark_repetitions=3
-// there and compare the Time column).
+// Last figures (wall s, idle machine, the bundled models of
+// configs/train/default.yaml; docs/simulator.md "Host speed"): lego one
+// thread 1.42-1.54 against the reference renderer's 1.05-1.07 in the same
+// runs (1.37x), two threads 0.96-1.16; mic one thread 1.08-1.12 against
+// 0.88-0.91.
 // A frame whose model or dataset is missing is skipped with a message.
 #include <benchmark/benchmark.h>
 
