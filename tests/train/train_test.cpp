@@ -326,5 +326,19 @@ TEST(Train, PresetsAreValid) {
   EXPECT_GE(overlays, 5);
 }
 
+// default.yaml is the built-in defaults (what `edrnr train` uses without
+// --config), and the preset before it, base-v1.yaml, with the pair the
+// ablations chose laid on top (docs/training.md).
+TEST(Train, DefaultPresetIsTheBuiltInDefaultsAndBaseV1WithThePair) {
+  const fs::path train_dir = fs::path(EDRNR_SOURCE_DIR) / "configs" / "train";
+  const TrainConfig preset = load_train_config(train_dir / "default.yaml");
+  EXPECT_EQ(to_yaml(preset), to_yaml(TrainConfig{}));
+  const TrainConfig base = load_train_config(train_dir / "base-v1.yaml");
+  EXPECT_EQ(base.per_cv_fraction, 0.1f);
+  EXPECT_EQ(base.distortion_weight, 0.f);
+  const TrainConfig pair = load_train_config(train_dir / "ablation" / "per-cv-0.3-distortion-0.01.yaml", base);
+  EXPECT_EQ(to_yaml(pair), to_yaml(preset));
+}
+
 }  // namespace
 }  // namespace edrnr::train
