@@ -55,36 +55,33 @@ struct FtuCounters {
 
   // Adds another instance's counts (runs split over two FTU models).
   FtuCounters& operator+=(const FtuCounters& o) {
-    iterations += o.iterations;
-    rays_advanced += o.rays_advanced;
-    fine_checks += o.fine_checks;
-    micro_word_reads += o.micro_word_reads;
-    micro_word_hits += o.micro_word_hits;
-    leaf_checks += o.leaf_checks;
-    micro_checks += o.micro_checks;
-    candidate_tests += o.candidate_tests;
-    samples += o.samples;
-    batches += o.batches;
-    position_evals += o.position_evals;
+    each(o, [](uint64_t& a, uint64_t b) { a += b; });
     return *this;
   }
   // The counts since an earlier reading `o` of the same instance.
   FtuCounters& operator-=(const FtuCounters& o) {
-    iterations -= o.iterations;
-    rays_advanced -= o.rays_advanced;
-    fine_checks -= o.fine_checks;
-    micro_word_reads -= o.micro_word_reads;
-    micro_word_hits -= o.micro_word_hits;
-    leaf_checks -= o.leaf_checks;
-    micro_checks -= o.micro_checks;
-    candidate_tests -= o.candidate_tests;
-    samples -= o.samples;
-    batches -= o.batches;
-    position_evals -= o.position_evals;
+    each(o, [](uint64_t& a, uint64_t b) { a -= b; });
     return *this;
   }
+
+ private:
+  // f(this counter, o's counter) for every counter.
+  template <class F>
+  void each(const FtuCounters& o, F f) {
+    f(iterations, o.iterations);
+    f(rays_advanced, o.rays_advanced);
+    f(fine_checks, o.fine_checks);
+    f(micro_word_reads, o.micro_word_reads);
+    f(micro_word_hits, o.micro_word_hits);
+    f(leaf_checks, o.leaf_checks);
+    f(micro_checks, o.micro_checks);
+    f(candidate_tests, o.candidate_tests);
+    f(samples, o.samples);
+    f(batches, o.batches);
+    f(position_evals, o.position_evals);
+  }
 };
-static_assert(sizeof(FtuCounters) == 11 * sizeof(uint64_t), "FtuCounters::operator+= must add every counter");
+static_assert(sizeof(FtuCounters) == 11 * sizeof(uint64_t), "FtuCounters::each must visit every counter");
 
 class Ftu {
  public:
