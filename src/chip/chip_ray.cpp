@@ -35,7 +35,7 @@ uint64_t first_true_steps(int64_t lo, int64_t hi, int64_t e) {
   if (lo >= hi) return 0;
   uint64_t n = uint64_t(hi - lo);
   uint64_t j = e <= lo ? 0 : std::min(uint64_t(e - lo), n);  // an answer outside [lo, hi] walks as its end does
-  if (std::has_single_bit(n)) return uint64_t(std::countr_zero(n)) + (j <= 1 ? 1 : 0);
+  if ((n & (n - 1)) == 0) return uint64_t(std::countr_zero(n)) + (j <= 1 ? 1 : 0);  // a power of two (n > 0)
   uint64_t steps = 0;
   while ((n & (n + 1)) != 0) {  // n + 1 is not a power of two (n > 0 here)
     const uint64_t half = n >> 1;

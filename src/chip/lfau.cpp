@@ -4,7 +4,12 @@
 
 namespace edrnr::chip {
 
-int LfauSelection::selected_rays() const { return std::popcount(unsigned(selected_mask)); }
+// The number of set bits of each 4-bit mask: the baseline x86-64 build has
+// no popcount instruction (std::popcount is a library call there).
+static_assert(kRaysPerPacket <= 4, "selected_rays counts 4-bit masks");
+constexpr std::array<uint8_t, 16> kBitsSet{0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+
+int LfauSelection::selected_rays() const { return kBitsSet[selected_mask & 15u]; }
 
 LfauSelection lfau_select(const std::array<Vec3i, kRaysPerPacket>& voxel, uint8_t active_mask, const Vec3i& travel_sign,
                           bool lag_first) {

@@ -180,8 +180,9 @@ std::vector<int32_t> Tme::encode_direction(const Vec3d& dir, int frequencies, co
   }
   double* sin_v = arg + count;
   double* cos_v = sin_v + count;
-  for (int k = 0; k < frequencies; ++k)
-    for (int a = 0; a < 3; ++a) arg[3 * k + a] = std::ldexp(1.0, k) * dir[a];
+  double scale = 1.0;  // 2^k, exact (doubling a power of two)
+  for (int k = 0; k < frequencies; ++k, scale *= 2.0)
+    for (int a = 0; a < 3; ++a) arg[3 * k + a] = scale * dir[a];
   det_sin_cos(arg, count, sin_v, cos_v);
   for (int k = 0; k < frequencies; ++k) {
     for (int a = 0; a < 3; ++a) put(sin_v[size_t(3 * k + a)]);

@@ -225,6 +225,12 @@ inline int64_t to_fixed_unsigned(double v, int frac_bits, int bits, Rounding mod
 
 // The value q * 2^-frac_bits. Exact when |q| < 2^53 (otherwise the nearest
 // double, ties to even).
-inline double from_fixed(int64_t q, int frac_bits) { return std::ldexp(double(q), -frac_bits); }
+// Scaling by 2^-frac_bits, a normal double for |frac_bits| <= 960, is exact
+// unless the product leaves the normal range, which it cannot for such
+// frac_bits and |q| < 2^63 (std::ldexp, a library call, for the rest).
+inline double from_fixed(int64_t q, int frac_bits) {
+  if (frac_bits < -960 || frac_bits > 960) return std::ldexp(double(q), -frac_bits);
+  return double(q) * std::bit_cast<double>(uint64_t(1023 - frac_bits) << 52);
+}
 
 }  // namespace edrnr::fx

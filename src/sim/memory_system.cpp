@@ -67,6 +67,8 @@ MemorySystem::MemorySystem(const DramConfig& dram, double core_clock_MHz, uint32
   core_hz_ = uint64_t(std::llround(core_clock_MHz * 1e6));
   dram_hz_ = uint64_t(std::llround(1e9 / dram.tCK_ns));
   if (core_hz_ == 0) fail("core clock {} MHz rounds to 0 Hz", core_clock_MHz);
+  dram_per_core_ = dram_hz_ / core_hz_;
+  dram_per_core_rem_ = dram_hz_ % core_hz_;
   if (max_request_bytes == 0) fail("max_request_bytes must be at least 1");
   // Every request must fit the controller queue, whatever its alignment.
   const uint64_t worst_bursts = (uint64_t(max_request_bytes) + dram.burst_bytes() - 1) / dram.burst_bytes() + 1;
@@ -133,7 +135,7 @@ void MemorySystem::write(DataType type, uint64_t addr, uint32_t bytes, uint64_t 
 }
 
 void MemorySystem::advance(uint64_t cycle, std::vector<MemoryCompletion>& done) {
-  const uint64_t target = uint64_t((unsigned __int128)(cycle + 1) * dram_hz_ / core_hz_);
+  const uint64_t target = dram_target(cycle);
   bool refused = false;
   if (waiting_.empty() && dram_.idle()) {
     // Nothing to hand over and nothing in flight: the same clocks in bulk.
@@ -166,6 +168,25 @@ void MemorySystem::advance(uint64_t cycle, std::vector<MemoryCompletion>& done) 
     }
   }
   if (refused) ++dram_rejections_;
+}
+
+uint64_t MemorySystem::dram_target(uint64_t cycle) {
+  // floor((cycle + 1) dram_hz / core_hz): from the last cycle's quotient and
+  // remainder when the cycles follow each other (no division per cycle).
+  if (cycle == target_cycle_ + 1 && target_cycle_ != UINT64_MAX) {
+    target_ += dram_per_core_;
+    target_rem_ += dram_per_core_rem_;
+    if (target_rem_ >= core_hz_) {
+      target_rem_ -= core_hz_;
+      ++target_;
+    }
+  } else {
+    const unsigned __int128 x = (unsigned __int128)(cycle + 1) * dram_hz_;
+    target_ = uint64_t(x / core_hz_);
+    target_rem_ = uint64_t(x % core_hz_);
+  }
+  target_cycle_ = cycle;
+  return target_;
 }
 
 uint64_t MemorySystem::quiet_until(uint64_t cycle) const {

@@ -117,6 +117,8 @@ class MemorySystem {
   void update_stats();
 
  private:
+  // The DRAM clock that ends core cycle `cycle`: floor((cycle + 1) dram_hz / core_hz).
+  uint64_t dram_target(uint64_t cycle);
   struct Transfer {
     DataType type = DataType::Bitmaps;
     bool write = false;
@@ -144,6 +146,10 @@ class MemorySystem {
   DramSystem dram_;
   AddressMap map_;
   uint64_t core_hz_ = 0, dram_hz_ = 0;
+  // dram_target's running quotient and remainder (target_cycle_: the cycle
+  // they belong to; UINT64_MAX: none yet).
+  uint64_t dram_per_core_ = 0, dram_per_core_rem_ = 0;
+  uint64_t target_cycle_ = UINT64_MAX, target_ = 0, target_rem_ = 0;
   uint32_t max_request_bytes_;
   std::vector<Transfer> transfers_;
   std::vector<uint32_t> free_transfers_;
