@@ -115,6 +115,11 @@ void TrainConfig::validate() const {
   if (!(tv_weight >= 0.f)) fail("train config: tv_weight must not be negative");
   if (tv_levels < 1 || tv_levels > int(levels.size()))
     fail("train config: tv_levels {} must be between 1 and the number of levels ({})", tv_levels, levels.size());
+  if (!level_unlock_steps.empty() && level_unlock_steps.size() != levels.size())
+    fail("train config: level_unlock_steps has {} entries for {} levels (give one per level, or none)",
+         level_unlock_steps.size(), levels.size());
+  for (int s : level_unlock_steps)
+    if (s < 0) fail("train config: level_unlock_steps entry {} must not be negative", s);
   if (!(block_tv_weight >= 0.f)) fail("train config: block_tv_weight must not be negative");
   if (!(distortion_weight >= 0.f)) fail("train config: distortion_weight must not be negative");
   if (!(mlp_tie_weight >= 0.f)) fail("train config: mlp_tie_weight must not be negative");
@@ -209,6 +214,7 @@ const std::map<std::string, Field>& fields() {
       {"adam_eps", scalar(&TrainConfig::adam_eps)},
       {"tv_weight", scalar(&TrainConfig::tv_weight)},
       {"tv_levels", scalar(&TrainConfig::tv_levels)},
+      {"level_unlock_steps", int_list(&TrainConfig::level_unlock_steps)},
       {"block_tv_weight", scalar(&TrainConfig::block_tv_weight)},
       {"distortion_weight", scalar(&TrainConfig::distortion_weight)},
       {"mlp_tie_weight", scalar(&TrainConfig::mlp_tie_weight)},

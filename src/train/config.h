@@ -45,6 +45,11 @@ struct TrainConfig {
   float lr_final = 0.05f;   // the learning rate decays exponentially to this factor at the last step
   int64_t lr_warmup = 100;  // linear warm-up steps
   float adam_beta1 = 0.9f, adam_beta2 = 0.99f, adam_eps = 1e-15f;
+  // Per pyramid level (coarsest first), the step from which it is read and
+  // trained; before it the level's channels read zero (coarse to fine).
+  // Empty: every level from step 0. Steps are absolute, so --minutes and
+  // --resume see the same schedule.
+  std::vector<int> level_unlock_steps;
   float tv_weight = 0.f;        // total variation on the pyramid's finest levels (main phase)
   int tv_levels = 1;            // how many of the finest levels tv_weight applies to
   float block_tv_weight = 0.f;  // total variation on the feature blocks, copies across faces included (later phases)

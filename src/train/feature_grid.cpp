@@ -68,6 +68,10 @@ int FeaturePyramid::slab_micro() const {
 void FeaturePyramid::interpolate(const Vec3f& p, const Vec3i& m, float* out) const {
   for (size_t li = 0; li < levels_.size(); ++li) {
     const PyramidLevel& L = levels_[li];
+    if (!level_active(li)) {
+      std::fill_n(out + li * kLevelChannels, kLevelChannels, 0.f);
+      continue;
+    }
     const float inv = 1.f / float(1 << L.shift);  // exact: a power of two
     const int cx = m.x >> L.shift, cy = m.y >> L.shift, cz = m.z >> L.shift;
     float w[8];
@@ -85,7 +89,9 @@ void FeaturePyramid::interpolate(const Vec3f& p, const Vec3i& m, float* out) con
 }
 
 void FeaturePyramid::prefetch(const Vec3i& m) const {
-  for (const PyramidLevel& L : levels_) {
+  for (size_t li = 0; li < levels_.size(); ++li) {
+    if (!level_active(li)) continue;
+    const PyramidLevel& L = levels_[li];
     const size_t n = size_t(L.res) + 1;
     const size_t base = L.vertex_index(m.x >> L.shift, m.y >> L.shift, m.z >> L.shift);
     const float* v = L.value.data();
@@ -104,6 +110,7 @@ void FeaturePyramid::scatter_gradients(const GradientSlabs& slabs, const std::ve
 #pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < n_slabs; ++j) {
     for (size_t li = 0; li < levels_.size(); ++li) {
+      if (!level_active(li)) continue;
       PyramidLevel& L = levels_[li];
       auto& list = L.adam.touched_list[size_t(j)];
       const float inv = 1.f / float(1 << L.shift);

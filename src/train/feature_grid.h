@@ -73,6 +73,12 @@ class FeaturePyramid {
   std::vector<PyramidLevel>& levels() { return levels_; }
   const std::vector<PyramidLevel>& levels() const { return levels_; }
 
+  // Which levels are read and trained: bit l for level l (all by default).
+  // An inactive level's channels interpolate to zero and get no gradient.
+  void set_active_levels(uint32_t mask) { active_ = mask; }
+  uint32_t active_levels() const { return active_; }
+  bool level_active(size_t l) const { return (active_ >> l) & 1u; }
+
   // Features at micro position p inside micro voxel m (F values).
   void interpolate(const Vec3f& p, const Vec3i& m, float* out) const;
   // Asks the memory system for the values interpolate(., m) will read (a hint).
@@ -92,6 +98,7 @@ class FeaturePyramid {
  private:
   int micro_res_ = 0;
   std::vector<PyramidLevel> levels_;
+  uint32_t active_ = ~0u;
 };
 
 // INT4 feature quantization as the model stores it (scene_model.h):

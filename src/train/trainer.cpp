@@ -823,6 +823,8 @@ struct Trainer::State {
   // --- phase changes ----------------------------------------------------------
 
   void freeze() {
+    // The levels of the last main-phase step (also after a resume).
+    pyramid.set_active_levels(active_levels(std::max<int64_t>(step - 1, 0)));
     // A full, fresh sweep so that every voxel reflects the final main-phase model.
     const float decay = std::pow(cfg.occupancy_decay, float(kSweepParts));
     for (int p = 0; p < kSweepParts; ++p) {
@@ -977,6 +979,14 @@ struct Trainer::State {
 
   // --- the step -------------------------------------------------------------
 
+  // The pyramid levels read and trained at main-phase step s (bit l: level l).
+  uint32_t active_levels(int64_t s) const {
+    uint32_t mask = 0;
+    for (size_t l = 0; l < cfg.levels.size(); ++l)
+      if (cfg.level_unlock_steps.empty() || s >= cfg.level_unlock_steps[l]) mask |= 1u << l;
+    return mask;
+  }
+
   void do_step() {
     if (phase == Phase::Done) return;
     using clock = std::chrono::steady_clock;
@@ -990,6 +1000,7 @@ struct Trainer::State {
     if (phase == Phase::PerCv && step >= qat_step()) start_quantization();
     lap(kPhase);
     if (phase == Phase::Main) {
+      pyramid.set_active_levels(active_levels(step));
       if (step % cfg.occupancy_every == 0) refresh_occupancy();
       if (step >= cfg.aabb_start && (step - cfg.aabb_start) % cfg.aabb_every == 0) update_aabb();
     }

@@ -2,6 +2,7 @@
 // and the forward kernels against closed forms.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -345,6 +346,34 @@ TEST(FeatureGrid, PyramidInterpolatesLinearFunctionsExactly) {
   for (int li = 0; li < 3; ++li)
     for (int k = 0; k < 4; ++k)
       EXPECT_NEAR(out[li * 4 + k], float(k + 1) * p.x - 0.5f * p.y + 0.25f * p.z, 1e-4) << li << " " << k;
+}
+
+TEST(FeatureGrid, InactivePyramidLevelsReadZeroAndGetNoGradient) {
+  const int R = 8;
+  FeaturePyramid pyr(R, {2, 4, 8}, 23, 0.5f);
+  const int F = pyr.channels();
+  const Vec3f p{3.3f, 5.6f, 1.2f};
+  std::vector<float> all(static_cast<size_t>(F)), some(static_cast<size_t>(F));
+  pyr.interpolate(p, {3, 5, 1}, all.data());
+  pyr.set_active_levels(0b101);  // level 1 off
+  pyr.interpolate(p, {3, 5, 1}, some.data());
+  for (int c = 0; c < F; ++c) {
+    if (c / kLevelChannels == 1)
+      EXPECT_EQ(some[size_t(c)], 0.f) << c;
+    else
+      EXPECT_EQ(some[size_t(c)], all[size_t(c)]) << c;
+  }
+  EXPECT_NE(all[4], 0.f);  // the level off has values
+  const GridSamples s = samples_in_every_voxel({0, 0, 0}, {R, R, R}, 24);
+  std::vector<float> r(s.ids.size() * size_t(F), 1.f);
+  GradientSlabs slabs;
+  slabs.build(R, pyr.slab_micro(), s.ids, s.micro);
+  pyr.scatter_gradients(slabs, s.pos, s.micro, r);
+  for (int li = 0; li < 3; ++li) {
+    const PyramidLevel& L = pyr.levels()[size_t(li)];
+    const bool any = std::any_of(L.adam.grad.begin(), L.adam.grad.end(), [](float g) { return g != 0.f; });
+    EXPECT_EQ(any, li != 1) << li;
+  }
 }
 
 TEST(FeatureGrid, PyramidTotalVariationCoversTheFinestLevelsAsked) {

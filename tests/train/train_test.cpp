@@ -299,6 +299,12 @@ TEST(Train, RejectsBadInputWithClearErrors) {
   EXPECT_NE(message([] { parse_train_config("color_hidden: [256, 256]\n", "p.yaml"); }).find("MLP cache"),
             std::string::npos);
   EXPECT_NE(message([] { parse_train_config("tv_levels: 5\n", "p.yaml"); }).find("tv_levels"), std::string::npos);
+  EXPECT_NE(message([] { parse_train_config("level_unlock_steps: [0, 100]\n", "p.yaml"); }).find("4 levels"),
+            std::string::npos);
+  EXPECT_NE(message([] { parse_train_config("level_unlock_steps: [0, 0, -1, 5]\n", "p.yaml"); }).find("negative"),
+            std::string::npos);
+  EXPECT_EQ(parse_train_config("level_unlock_steps: [0, 0, 300, 600]\n", "p.yaml").level_unlock_steps,
+            (std::vector<int>{0, 0, 300, 600}));
   EXPECT_NE(message([] { parse_train_config("distortion_weight: -1\n", "p.yaml"); }).find("distortion_weight"),
             std::string::npos);
   EXPECT_NE(message([] { parse_train_config("block_tv_weight: -1\n", "p.yaml"); }).find("block_tv_weight"),
