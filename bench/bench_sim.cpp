@@ -14,9 +14,9 @@
 //   bench_sim --benchmark_filter=MemorySystem
 // Last figures (wall s, idle machine, the bundled models of
 // configs/train/default.yaml; docs/simulator.md "Host speed"): lego one
-// thread 1.42-1.54 against the reference renderer's 1.05-1.07 in the same
-// runs (1.37x), two threads 0.96-1.16; mic one thread 1.08-1.12 against
-// 0.88-0.91.
+// thread 1.38-1.41 against the reference renderer's 1.04-1.11 in the same
+// runs (1.33x); mic one thread 1.05-1.08 against 0.86 (1.23x); two threads
+// 0.96-1.16 when the host leaves both cores to the machine.
 // A frame whose model or dataset is missing is skipped with a message.
 #include <benchmark/benchmark.h>
 
