@@ -67,7 +67,11 @@ TEST(ServeValidate, ParameterSets) {
   EXPECT_EQ(status_of([] { check_params({{"a", std::string(kMaxParamBytes + 1, '1')}}, {"a"}); }), 400);
   EXPECT_NO_THROW(check_params({{"a", std::string(kMaxParamBytes, '1')}}, {"a"}));
   Params many;
-  for (size_t i = 0; i <= kMaxParams; ++i) many.emplace("p" + std::to_string(i), "1");
+  for (size_t i = 0; i <= kMaxParams; ++i) {
+    std::string key = std::to_string(i);
+    key.insert(key.begin(), 'p');  // not "p" + ...: GCC 12 warns (falsely) of an overlapping copy there
+    many.emplace(key, "1");
+  }
   EXPECT_EQ(status_of([&] { check_params(many, {}); }), 400);
   EXPECT_EQ(choice_param({}, "format", {"rgba", "png"}, "rgba"), "rgba");
   EXPECT_EQ(status_of([] { choice_param({{"format", "gif"}}, "format", {"rgba", "png"}, "rgba"); }), 400);
