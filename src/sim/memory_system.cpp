@@ -173,7 +173,7 @@ void MemorySystem::advance(uint64_t cycle, std::vector<MemoryCompletion>& done) 
 uint64_t MemorySystem::dram_target(uint64_t cycle) {
   // floor((cycle + 1) dram_hz / core_hz): from the last cycle's quotient and
   // remainder when the cycles follow each other (no division per cycle).
-  if (cycle == target_cycle_ + 1 && target_cycle_ != UINT64_MAX) {
+  if (cycle == target_cycle_ + 1) {
     target_ += dram_per_core_;
     target_rem_ += dram_per_core_rem_;
     if (target_rem_ >= core_hz_) {

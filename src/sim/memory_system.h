@@ -146,8 +146,8 @@ class MemorySystem {
   DramSystem dram_;
   AddressMap map_;
   uint64_t core_hz_ = 0, dram_hz_ = 0;
-  // dram_target's running quotient and remainder (target_cycle_: the cycle
-  // they belong to; UINT64_MAX: none yet).
+  // dram_target's running quotient and remainder for core cycle
+  // target_cycle_; they start as those of cycle -1 (UINT64_MAX), 0 and 0.
   uint64_t dram_per_core_ = 0, dram_per_core_rem_ = 0;
   uint64_t target_cycle_ = UINT64_MAX, target_ = 0, target_rem_ = 0;
   uint32_t max_request_bytes_;

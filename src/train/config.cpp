@@ -115,6 +115,7 @@ void TrainConfig::validate() const {
   if (!(tv_weight >= 0.f)) fail("train config: tv_weight must not be negative");
   if (tv_levels < 1 || tv_levels > int(levels.size()))
     fail("train config: tv_levels {} must be between 1 and the number of levels ({})", tv_levels, levels.size());
+  static_assert(kMaxFeatureChannels / 4 <= 32, "the trainer's active-level masks have 32 bits");
   if (!level_unlock_steps.empty() && level_unlock_steps.size() != levels.size())
     fail("train config: level_unlock_steps has {} entries for {} levels (give one per level, or none)",
          level_unlock_steps.size(), levels.size());

@@ -76,7 +76,6 @@ class FeaturePyramid {
   // Which levels are read and trained: bit l for level l (all by default).
   // An inactive level's channels interpolate to zero and get no gradient.
   void set_active_levels(uint32_t mask) { active_ = mask; }
-  uint32_t active_levels() const { return active_; }
   bool level_active(size_t l) const { return (active_ >> l) & 1u; }
 
   // Features at micro position p inside micro voxel m (F values).
