@@ -72,6 +72,9 @@ struct TrainConfig {
 
   // --- quantization ---
   int quant_refit_every = 16;  // steps between refits of the INT4 feature ranges
+  float mlp_equalize = 0.f;    // at the start of quantization, cross-layer equalization of every MLP's hidden
+                               // units (equalize_mlp in mlp_kernels.h): 0 off, 1 full; the same function,
+                               // less INT8 error
 
   // --- memory ---
   // The trainer's state (feature pyramid, occupancy, feature blocks with their

@@ -137,6 +137,40 @@ void fake_quantize_mlp(const MlpLayout& layout, const float* params, float* out)
       }
 }
 
+void equalize_mlp(const MlpLayout& layout, float strength, float* params, float* adam_m, float* adam_v) {
+  if (strength == 0.f) return;
+  auto scale = [&](size_t k, double s) {
+    params[k] = float(double(params[k]) * s);
+    if (adam_m) adam_m[k] = float(double(adam_m[k]) / s);
+    if (adam_v) adam_v[k] = float(double(adam_v[k]) / (s * s));
+  };
+  for (const auto* ls : {&layout.density, &layout.color})
+    for (size_t l = 0; l + 1 < ls->size(); ++l) {
+      const MlpLayout::Layer& a = (*ls)[l];
+      const MlpLayout::Layer& b = (*ls)[l + 1];
+      std::vector<double> col_max(size_t(b.in), 0.0);
+      for (int o = 0; o < b.out; ++o)
+        for (int j = 0; j < b.in; ++j)
+          col_max[size_t(j)] = std::max(col_max[size_t(j)], std::fabs(double(params[b.w + size_t(o) * b.in + j])));
+      double log_sum = 0.0;
+      int nonzero = 0;
+      for (double c : col_max)
+        if (c > 0.0) {
+          log_sum += std::log(c);
+          ++nonzero;
+        }
+      if (nonzero == 0) continue;
+      const double g = std::exp(log_sum / nonzero);
+      for (int j = 0; j < b.in; ++j) {
+        if (col_max[size_t(j)] == 0.0) continue;
+        const double s = std::clamp(std::pow(g / col_max[size_t(j)], double(strength)), 1.0 / 256, 256.0);
+        for (int o = 0; o < b.out; ++o) scale(b.w + size_t(o) * b.in + size_t(j), s);
+        for (int i = 0; i < a.in; ++i) scale(a.w + size_t(j) * a.in + size_t(i), 1.0 / s);
+        scale(a.b + size_t(j), 1.0 / s);
+      }
+    }
+}
+
 MlpQ quantize_mlp(const MlpLayout& layout, const float* params, const std::vector<float>& layer_in_max_abs) {
   MlpQ q;
   size_t layer_index = 0;

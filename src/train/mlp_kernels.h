@@ -58,6 +58,18 @@ int8_t int8_quantize(float w, float scale);
 // unchanged): the forward weights of quantization-aware training.
 void fake_quantize_mlp(const MlpLayout& layout, const float* params, float* out);
 
+// Cross-layer equalization: for every ReLU hidden unit j (between layer l and
+// layer l + 1 of either net), row j of layer l (weights and bias) is divided
+// by s_j and column j of layer l + 1 multiplied by s_j, s_j = (g / c_j)^strength
+// where c_j is column j's largest |weight| and g the geometric mean of the
+// layer's nonzero c_j (s_j clamped to 2^-8 .. 2^8). ReLU(x / s) = ReLU(x) / s,
+// so the MLP computes the same function (up to float rounding), but the
+// columns of layer l + 1 have more even ranges, which per-row INT8 scales
+// quantize with less error. strength 0 changes nothing, 1 equalizes fully.
+// Adam moments (m, v; may be null) are rescaled as the gradients are:
+// a parameter multiplied by s has its gradient divided by s.
+void equalize_mlp(const MlpLayout& layout, float strength, float* params, float* adam_m, float* adam_v);
+
 // The INT8 MLP. layer_in_max_abs holds, per layer (density then colour), the
 // largest |input| seen; in_scale = that / 127 (1 when zero).
 MlpQ quantize_mlp(const MlpLayout& layout, const float* params, const std::vector<float>& layer_in_max_abs);

@@ -969,6 +969,7 @@ struct Trainer::State {
   void start_quantization() {
     if (mse_ema > 0) psnr_float = -10.0 * std::log10(mse_ema);
     if (!max_weight.empty()) prune();
+    equalize_mlps();
     float_blocks = blocks.values();
     float_mlps = mlp_params;
     feature_quant = blocks.fit_quantization();
@@ -1096,6 +1097,13 @@ struct Trainer::State {
         grad[size_t(m) * P + k] += 2.f * cfg.mlp_tie_weight * float(double(mlp_params[size_t(m) * P + k]) - mean[k]);
   }
 
+  // Cross-layer equalization of every MLP (the same functions; less INT8 error).
+  void equalize_mlps() {
+    const size_t P = layout.param_count;
+    for (int m = 0; m < n_mlps; ++m)
+      equalize_mlp(layout, cfg.mlp_equalize, &mlp_params[size_t(m) * P], &mlp_m[size_t(m) * P], &mlp_v[size_t(m) * P]);
+  }
+
   void update_fake_quantized_mlps() {
     mlp_eff.resize(mlp_params.size());
     for (int m = 0; m < n_mlps; ++m)
@@ -1143,13 +1151,22 @@ struct Trainer::State {
       std::vector<float> fallback(n_layers, 0.f);
       for (size_t k = 0; k < layer_in_max.size(); ++k)
         fallback[k % n_layers] = std::max(fallback[k % n_layers], layer_in_max[k]);
+      // Without a quantization-aware phase the MLPs are equalized now (a copy).
+      std::vector<float> equalized;
+      const float* params = mlp_params.data();
+      if (phase < Phase::Quantize && cfg.mlp_equalize > 0.f) {
+        equalized = mlp_params;
+        for (size_t mi = 0; mi < mlp_cv.size(); ++mi)
+          equalize_mlp(layout, cfg.mlp_equalize, &equalized[mi * layout.param_count], nullptr, nullptr);
+        params = equalized.data();
+      }
       for (size_t mi = 0; mi < mlp_cv.size(); ++mi) {
         std::vector<float> mx(n_layers, 0.f);
         for (size_t k = 0; k < n_layers; ++k) {
           const size_t j = mi * n_layers + k;
           mx[k] = j < layer_in_max.size() && layer_in_max[j] > 0.f ? layer_in_max[j] : fallback[k];
         }
-        m.mlps_q8.push_back(quantize_mlp(layout, &mlp_params[mi * layout.param_count], mx));
+        m.mlps_q8.push_back(quantize_mlp(layout, &params[mi * layout.param_count], mx));
       }
     } else {
       m.features_f32 = have_snapshot ? float_blocks : blocks.values();

@@ -178,6 +178,84 @@ TEST(MlpKernels, Int8QuantizationRoundsPerRow) {
   EXPECT_EQ(int8_row_scale(zeros, 3), 1.f);
 }
 
+// Equalization by hand: density net [1, 2, 1], hidden unit 0 feeding the
+// output with weight 8, unit 1 with weight 2: the geometric mean of the
+// column maxima is 4, so unit 0 is scaled by 1/2 and unit 1 by 2.
+TEST(MlpKernels, EqualizationMovesColumnRangesToTheirGeometricMean) {
+  MlpArch a;
+  a.density_widths = {1, 2, 1};
+  a.dir_frequencies = 0;
+  a.color_widths = {1 + 3, 3};
+  MlpLayout layout(a);
+  std::vector<float> p(layout.param_count, 0.f), m(layout.param_count, 1.f), v(layout.param_count, 1.f);
+  const auto& L0 = layout.density[0];
+  const auto& L1 = layout.density[1];
+  p[L0.w + 0] = 3.f, p[L0.w + 1] = 5.f, p[L0.b + 0] = 1.f, p[L0.b + 1] = -1.f;
+  p[L1.w + 0] = 8.f, p[L1.w + 1] = -2.f;
+  equalize_mlp(layout, 1.f, p.data(), m.data(), v.data());
+  EXPECT_FLOAT_EQ(p[L1.w + 0], 4.f);
+  EXPECT_FLOAT_EQ(p[L1.w + 1], -4.f);
+  EXPECT_FLOAT_EQ(p[L0.w + 0], 6.f);  // row 0 times 2 (its column was halved)
+  EXPECT_FLOAT_EQ(p[L0.b + 0], 2.f);
+  EXPECT_FLOAT_EQ(p[L0.w + 1], 2.5f);  // row 1 halved (its column doubled)
+  EXPECT_FLOAT_EQ(p[L0.b + 1], -0.5f);
+  // Moments follow the gradients: a parameter times s has m / s and v / s^2.
+  EXPECT_FLOAT_EQ(m[L1.w + 0], 2.f);
+  EXPECT_FLOAT_EQ(v[L1.w + 0], 4.f);
+  EXPECT_FLOAT_EQ(m[L0.w + 1], 2.f);
+  EXPECT_FLOAT_EQ(v[L0.w + 1], 4.f);
+  EXPECT_FLOAT_EQ(m[L1.b], 1.f);  // output biases are not touched
+}
+
+// On a random MLP whose last layer has one dominant column, equalization
+// keeps every output (ReLU is positively homogeneous) and lowers the error
+// of the INT8 weights.
+TEST(MlpKernels, EqualizationKeepsTheFunctionAndLowersInt8Error) {
+  const MlpLayout layout(small_arch());
+  std::vector<float> p(layout.param_count);
+  init_mlp_params(layout, 7, p.data());
+  for (size_t i = 0; i < p.size(); ++i) p[i] += rnd(7, 1000 + i, -0.1f, 0.1f);
+  for (const auto* net : {&layout.density, &layout.color}) {
+    const auto& last = net->back();
+    const auto& prev = (*net)[net->size() - 2];
+    for (int o = 0; o < last.out; ++o) p[last.w + size_t(o) * last.in] *= 30.f;  // column 0 dominates
+    for (int i = 0; i < prev.in; ++i) p[prev.w + size_t(i)] /= 30.f;             // hidden unit 0 small
+    p[prev.b] /= 30.f;
+  }
+  std::vector<float> x(size_t(layout.density[0].in) * kLanes), xc(size_t(layout.color[0].in) * kLanes);
+  for (size_t i = 0; i < x.size(); ++i) x[i] = rnd(7, 50000 + i, -1.f, 1.f);
+  for (size_t i = 0; i < xc.size(); ++i) xc[i] = rnd(7, 90000 + i, -1.f, 1.f);
+  auto outputs = [&](const std::vector<float>& params) {
+    std::vector<float> out;
+    for (const auto* net : {&layout.density, &layout.color}) {
+      size_t floats = 0;
+      for (const auto& l : *net) floats += size_t(l.out) * kLanes;
+      std::vector<float> acts(floats);
+      net_forward(*net, params.data(), net == &layout.density ? x.data() : xc.data(), acts.data());
+      out.insert(out.end(), acts.end() - ptrdiff_t(size_t(net->back().out) * kLanes), acts.end());
+    }
+    return out;
+  };
+  auto int8_error = [&](const std::vector<float>& params) {
+    std::vector<float> q(params.size());
+    fake_quantize_mlp(layout, params.data(), q.data());
+    const auto a = outputs(params), b = outputs(q);
+    double e = 0;
+    for (size_t i = 0; i < a.size(); ++i) e += double(a[i] - b[i]) * double(a[i] - b[i]);
+    return e;
+  };
+  const auto before = outputs(p);
+  const double error_before = int8_error(p);
+  std::vector<float> eq = p;
+  equalize_mlp(layout, 1.f, eq.data(), nullptr, nullptr);
+  const auto after = outputs(eq);
+  for (size_t i = 0; i < before.size(); ++i) EXPECT_NEAR(after[i], before[i], 1e-5f * (1.f + std::fabs(before[i])));
+  EXPECT_LT(int8_error(eq), 0.5 * error_before);
+  std::vector<float> same = p;
+  equalize_mlp(layout, 0.f, same.data(), nullptr, nullptr);
+  EXPECT_EQ(same, p);
+}
+
 // --- volume rendering ---
 
 TEST(Volume, CompositeMatchesClosedForm) {

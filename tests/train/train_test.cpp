@@ -262,6 +262,35 @@ TEST(Train, ExportedModelRendersWhatTrainingRendered) {
   EXPECT_LT(max_diff(t.render(cam), render_reference(t.export_model(true), cam, rs)), 1e-4f);
 }
 
+TEST(Train, EqualizedMlpsRenderWhatTheMlpsRenderedBefore) {
+  // mlp_equalize rescales the MLPs' hidden units when quantization-aware
+  // training starts: the float snapshot taken then holds other weights but
+  // renders the same image (pruning off, so the occupancy stays).
+  const Dataset data = load("train");
+  const Dataset test = load("test");
+  TrainConfig c = short_config();
+  c.prune_weight = 0.f;
+  c.mlp_equalize = 1.f;
+  Trainer t(data, c);
+  TrainOptions o;
+  o.stop_after = 80;  // the last per-CV step: the next one starts quantization
+  ASSERT_FALSE(t.run(o));
+  ASSERT_EQ(t.stats().phase, Phase::PerCv);
+  const SceneModel before = t.export_model(false);
+  ASSERT_TRUE(t.run({}));
+  const SceneModel after = t.export_model(false);
+  ASSERT_EQ(after.mlps_f32.size(), before.mlps_f32.size());
+  EXPECT_NE(after.mlps_f32, before.mlps_f32);
+  EXPECT_EQ(after.features_f32, before.features_f32);
+  RenderSettings rs;
+  rs.form = ModelForm::Float;
+  const Image a = render_reference(before, test.frames[0].camera, rs);
+  const Image b = render_reference(after, test.frames[0].camera, rs);
+  float m = 0.f;
+  for (size_t i = 0; i < a.data.size(); ++i) m = std::max(m, std::fabs(a.data[i] - b.data[i]));
+  EXPECT_LT(m, 1e-4f);
+}
+
 TEST(Train, RejectsBadInputWithClearErrors) {
   auto message = [](auto&& f) -> std::string {
     try {
