@@ -132,6 +132,7 @@ void TrainConfig::validate() const {
   if (!(aabb_filter_sigma >= 0.f)) fail("train config: aabb_filter_sigma must not be negative");
   if (!(aabb_keep > 0.f && aabb_keep <= 1.f)) fail("train config: aabb_keep must be in (0, 1]");
   if (!(prune_weight >= 0.f && prune_weight < 1.f)) fail("train config: prune_weight must be in [0, 1)");
+  if (!(prune_cv_weight >= 0.f && prune_cv_weight < 1.f)) fail("train config: prune_cv_weight must be in [0, 1)");
   if (quant_refit_every < 1) fail("train config: quant_refit_every must be at least 1");
   if (!(mlp_equalize >= 0.f && mlp_equalize <= 1.f)) fail("train config: mlp_equalize must be in [0, 1]");
   if (downscale < 1) fail("train config: downscale must be at least 1");
@@ -229,6 +230,7 @@ const std::map<std::string, Field>& fields() {
       {"aabb_filter_sigma", scalar(&TrainConfig::aabb_filter_sigma)},
       {"aabb_keep", scalar(&TrainConfig::aabb_keep)},
       {"prune_weight", scalar(&TrainConfig::prune_weight)},
+      {"prune_cv_weight", scalar(&TrainConfig::prune_cv_weight)},
       {"quant_refit_every", scalar(&TrainConfig::quant_refit_every)},
       {"mlp_equalize", scalar(&TrainConfig::mlp_equalize)},
       {"max_state_gib", scalar(&TrainConfig::max_state_gib)},

@@ -172,7 +172,7 @@ void Trainer::State::freeze() {
   mlp_v.assign(mlp_params.size(), 0.f);
   feature_adam_t = 0;
   mlp_adam_t = 0;
-  if (cfg.prune_weight > 0.f) max_weight.assign(occ.density.size(), 0.f);
+  if (cfg.prune_weight > 0.f || cfg.prune_cv_weight > 0.f) max_weight.assign(occ.density.size(), 0.f);
   phase = Phase::PerCv;
 }
 
@@ -182,12 +182,29 @@ void Trainer::State::freeze() {
 void Trainer::State::prune() {
   const int R = cfg.micro_res;
   Bitmap3 kept(R);
+  // The largest sample weight anywhere in each coarse voxel: a coarse voxel
+  // whose samples all stayed below prune_cv_weight (a floater, which costs
+  // the chip a whole MLP load) is emptied.
+  constexpr int kCv = kMicroPerFine * kFinePerCoarse;  // micro voxels per coarse voxel edge
+  const int cr = R / kCv;
+  std::vector<float> cv_peak(size_t(cr) * cr * cr, 0.f);
+  if (cfg.prune_cv_weight > 0.f)
+    for (int z = 0; z < R; ++z)
+      for (int y = 0; y < R; ++y)
+        for (int x = 0; x < R; ++x) {
+          const size_t i = kept.index(x, y, z);
+          if (!occ.micro.get(i)) continue;
+          float& peak = cv_peak[linear_index(x / kCv, y / kCv, z / kCv, cr)];
+          peak = std::max(peak, max_weight[i]);
+        }
   Vec3i lo{R, R, R}, hi{-1, -1, -1};
   for (int z = 0; z < R; ++z)
     for (int y = 0; y < R; ++y)
       for (int x = 0; x < R; ++x) {
         const size_t i = kept.index(x, y, z);
         if (!occ.micro.get(i) || max_weight[i] < cfg.prune_weight) continue;
+        if (cfg.prune_cv_weight > 0.f && cv_peak[linear_index(x / kCv, y / kCv, z / kCv, cr)] < cfg.prune_cv_weight)
+          continue;
         kept.set(i);
         lo = vmin(lo, Vec3i{x, y, z});
         hi = vmax(hi, Vec3i{x, y, z});
@@ -222,7 +239,6 @@ void Trainer::State::prune() {
   blocks.adam().m = std::move(m);
   blocks.adam().v = std::move(v);
   // MLPs of coarse voxels that still hold an occupied fine voxel.
-  const int cr = R / 32;
   std::vector<uint8_t> cv_used(size_t(cr) * cr * cr, 0);
   for (uint32_t fi : blocks.fine_index()) {
     const Vec3i f = fine_xyz(fi);

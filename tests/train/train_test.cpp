@@ -291,6 +291,31 @@ TEST(Train, EqualizedMlpsRenderWhatTheMlpsRenderedBefore) {
   EXPECT_LT(m, 1e-4f);
 }
 
+TEST(Train, CoarseVoxelPruningDropsWholeCoarseVoxelsAndTheirMlps) {
+  // prune_cv_weight empties every coarse voxel whose samples never weighed
+  // that much (here 2 of the scene's 8 coarse voxels reach 0.2), with their
+  // blocks and MLPs. A threshold no coarse voxel reaches would empty the
+  // scene: then nothing is pruned.
+  const Dataset data = load("train");
+  auto train = [&](float threshold) {
+    TrainConfig c = short_config();
+    c.prune_cv_weight = threshold;
+    Trainer t(data, c);
+    EXPECT_TRUE(t.run({}));
+    SceneModel m = t.export_model(true);
+    EXPECT_NO_THROW(m.check_structure());
+    return m;
+  };
+  const SceneModel none = train(0.f), high = train(0.2f), all = train(0.99f);
+  EXPECT_LT(high.mlp_count(), none.mlp_count());
+  EXPECT_LT(high.block_count(), none.block_count());
+  EXPECT_GT(high.mlp_count(), 0u);
+  // Nothing pruned at all (not even the micro voxels prune_weight would
+  // empty): every coarse voxel of the frozen occupancy keeps its MLP.
+  EXPECT_GE(all.mlp_count(), none.mlp_count());
+  EXPECT_GE(all.block_count(), none.block_count());
+}
+
 TEST(Train, RejectsBadInputWithClearErrors) {
   auto message = [](auto&& f) -> std::string {
     try {
@@ -373,6 +398,13 @@ TEST(Train, DefaultPresetIsTheBuiltInDefaultsAndBaseV1WithThePair) {
   EXPECT_EQ(base.distortion_weight, 0.f);
   const TrainConfig pair = load_train_config(train_dir / "ablation" / "per-cv-0.3-distortion-0.01.yaml", base);
   EXPECT_EQ(to_yaml(pair), to_yaml(preset));
+  // The candidate for the next default: default.yaml with the overlays the
+  // validation runs chose.
+  const TrainConfig candidate = load_train_config(train_dir / "candidate-v3.yaml");
+  const TrainConfig overlays =
+      load_train_config(train_dir / "ablation" / "mlp-equalize-0.5.yaml",
+                        load_train_config(train_dir / "ablation" / "lr-2x-per-cv-0.45.yaml", preset));
+  EXPECT_EQ(to_yaml(candidate), to_yaml(overlays));
 }
 
 }  // namespace
