@@ -139,13 +139,19 @@ TEST(MlpKernels, PaddingLanesAddNothingToParameterGradients) {
   EXPECT_EQ(g1, g2);
 }
 
-TEST(MlpKernels, LayerForwardIsAffineThenRelu) {
-  // density net [2, 2, 1]: h = relu(W0 x + b0), out = W1 h + b1, by hand.
+// A net small enough to check by hand: the given density widths (one geo
+// output), no direction encoding, a one-layer colour net.
+MlpLayout hand_layout(std::vector<int> density_widths) {
   MlpArch a;
-  a.density_widths = {2, 2, 1};
+  a.density_widths = std::move(density_widths);
   a.dir_frequencies = 0;
   a.color_widths = {1 + 3, 3};
-  MlpLayout layout(a);
+  return MlpLayout(a);
+}
+
+TEST(MlpKernels, LayerForwardIsAffineThenRelu) {
+  // density net [2, 2, 1]: h = relu(W0 x + b0), out = W1 h + b1, by hand.
+  const MlpLayout layout = hand_layout({2, 2, 1});
   std::vector<float> p(layout.param_count, 0.f);
   const auto& L0 = layout.density[0];
   const auto& L1 = layout.density[1];
@@ -182,11 +188,7 @@ TEST(MlpKernels, Int8QuantizationRoundsPerRow) {
 // output with weight 8, unit 1 with weight 2: the geometric mean of the
 // column maxima is 4, so unit 0 is scaled by 1/2 and unit 1 by 2.
 TEST(MlpKernels, EqualizationMovesColumnRangesToTheirGeometricMean) {
-  MlpArch a;
-  a.density_widths = {1, 2, 1};
-  a.dir_frequencies = 0;
-  a.color_widths = {1 + 3, 3};
-  MlpLayout layout(a);
+  const MlpLayout layout = hand_layout({1, 2, 1});
   std::vector<float> p(layout.param_count, 0.f), m(layout.param_count, 1.f), v(layout.param_count, 1.f);
   const auto& L0 = layout.density[0];
   const auto& L1 = layout.density[1];
