@@ -135,6 +135,10 @@ void TrainConfig::validate() const {
   if (!(prune_cv_weight >= 0.f && prune_cv_weight < 1.f)) fail("train config: prune_cv_weight must be in [0, 1)");
   if (quant_refit_every < 1) fail("train config: quant_refit_every must be at least 1");
   if (!(mlp_equalize >= 0.f && mlp_equalize <= 1.f)) fail("train config: mlp_equalize must be in [0, 1]");
+  if (mlp_equalize > 0.f && mlp_tie_weight > 0.f)
+    fail(
+        "train config: mlp_equalize and mlp_tie_weight cannot both be on: equalization rescales each MLP's hidden "
+        "units differently, so the MLPs' mean the tie pulls toward is no longer a meaningful MLP");
   if (downscale < 1) fail("train config: downscale must be at least 1");
   for (float b : background)
     if (!(b >= 0.f && b <= 1.f)) fail("train config: background values must be in [0, 1]");

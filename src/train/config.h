@@ -76,7 +76,7 @@ struct TrainConfig {
   int quant_refit_every = 16;  // steps between refits of the INT4 feature ranges
   float mlp_equalize = 0.f;    // at the start of quantization, cross-layer equalization of every MLP's hidden
                                // units (equalize_mlp in mlp_kernels.h): 0 off, 1 full; the same function,
-                               // less INT8 error
+                               // less INT8 error; not with mlp_tie_weight
 
   // --- memory ---
   // The trainer's state (feature pyramid, occupancy, feature blocks with their

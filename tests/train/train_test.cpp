@@ -350,6 +350,10 @@ TEST(Train, RejectsBadInputWithClearErrors) {
             std::string::npos);
   EXPECT_NE(message([] { parse_train_config("levels: [48]\n", "p.yaml"); }).find("levels"), std::string::npos);
   EXPECT_NE(message([] { parse_train_config("iters: many\n", "p.yaml"); }).find("'iters'"), std::string::npos);
+  EXPECT_NE(message([] {
+              parse_train_config("mlp_equalize: 0.5\nmlp_tie_weight: 0.001\n", "p.yaml").validate();
+            }).find("cannot both be on"),
+            std::string::npos);
   EXPECT_NE(message([] { parse_train_config("color_hidden: [256, 256]\n", "p.yaml"); }).find("MLP cache"),
             std::string::npos);
   EXPECT_NE(message([] { parse_train_config("tv_levels: 5\n", "p.yaml"); }).find("tv_levels"), std::string::npos);
@@ -401,9 +405,9 @@ TEST(Train, DefaultPresetIsTheBuiltInDefaultsAndBaseV1WithThePair) {
   // The candidate for the next default: default.yaml with the overlays the
   // validation runs chose.
   const TrainConfig candidate = load_train_config(train_dir / "candidate-v3.yaml");
-  const TrainConfig overlays =
-      load_train_config(train_dir / "ablation" / "mlp-equalize-0.5.yaml",
-                        load_train_config(train_dir / "ablation" / "lr-2x-per-cv-0.45.yaml", preset));
+  TrainConfig overlays = preset;
+  for (const char* o : {"lr-2x-per-cv-0.45.yaml", "mlp-equalize-0.5.yaml", "prune-cv-0.2.yaml"})
+    overlays = load_train_config(train_dir / "ablation" / o, overlays);
   EXPECT_EQ(to_yaml(candidate), to_yaml(overlays));
 }
 
