@@ -138,7 +138,7 @@ void TrainConfig::validate() const {
   if (mlp_equalize > 0.f && mlp_tie_weight > 0.f)
     fail(
         "train config: mlp_equalize and mlp_tie_weight cannot both be on: equalization rescales each MLP's hidden "
-        "units differently, so the MLPs' mean the tie pulls toward is no longer a meaningful MLP");
+        "units differently, so the MLPs' mean the tie pulls toward is no longer a meaningful MLP (set mlp_equalize: 0 to use the tie)");
   if (downscale < 1) fail("train config: downscale must be at least 1");
   for (float b : background)
     if (!(b >= 0.f && b <= 1.f)) fail("train config: background values must be in [0, 1]");

@@ -33,15 +33,15 @@ struct TrainConfig {
   int64_t plan_step = 1000;       // the learning rate holds until this step; --minutes fixes iters here (or
                                   // earlier, once a quarter of the budget is spent) from the speed measured
                                   // over the last 40 % of the steps, when empty space is already skipped
-  float per_cv_fraction = 0.3f;   // share of steps training per-CV MLPs in float
+  float per_cv_fraction = 0.45f;  // share of steps training per-CV MLPs in float
   float qat_fraction = 0.1f;      // share of steps of quantization-aware training (last)
   int64_t batch_samples = 65536;  // target samples evaluated per step
   int max_rays = 16384;           // rays per step, at most
   int min_rays = 256;             // rays per step, at least
 
   // --- optimiser ---
-  float lr_features = 1e-2f;
-  float lr_mlp = 1e-2f;
+  float lr_features = 2e-2f;
+  float lr_mlp = 2e-2f;
   float lr_final = 0.05f;   // the learning rate decays exponentially to this factor at the last step
   int64_t lr_warmup = 100;  // linear warm-up steps
   float adam_beta1 = 0.9f, adam_beta2 = 0.99f, adam_eps = 1e-15f;
@@ -69,12 +69,12 @@ struct TrainConfig {
   // --- pruning ---
   float prune_weight = 1e-3f;   // at the start of quantization-aware training, micro voxels whose samples never
                                 // weighed (T alpha) this much in the per-CV phase are emptied; 0: keep all
-  float prune_cv_weight = 0.f;  // then also every coarse voxel none of whose samples weighed this much
+  float prune_cv_weight = 0.2f;  // then also every coarse voxel none of whose samples weighed this much
                                 // (floaters: each occupied coarse voxel is an MLP the chip loads); 0: off
 
   // --- quantization ---
   int quant_refit_every = 16;  // steps between refits of the INT4 feature ranges
-  float mlp_equalize = 0.f;    // at the start of quantization, cross-layer equalization of every MLP's hidden
+  float mlp_equalize = 0.5f;   // at the start of quantization, cross-layer equalization of every MLP's hidden
                                // units (equalize_mlp in mlp_kernels.h): 0 off, 1 full; the same function,
                                // less INT8 error; not with mlp_tie_weight
 

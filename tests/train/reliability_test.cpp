@@ -65,6 +65,7 @@ TrainConfig tiny(int64_t iters) {
   c.aabb_every = 64;
   c.lr_warmup = 20;
   c.plan_step = 120;
+  c.prune_cv_weight = 0.f;  // a few coarse voxels, each part of the object
   return c;
 }
 
