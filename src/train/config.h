@@ -67,10 +67,10 @@ struct TrainConfig {
   float aabb_keep = 0.35f;         // filtered occupancy kept in the AABB
 
   // --- pruning ---
-  float prune_weight = 1e-3f;   // at the start of quantization-aware training, micro voxels whose samples never
-                                // weighed (T alpha) this much in the per-CV phase are emptied; 0: keep all
+  float prune_weight = 1e-3f;    // at the start of quantization-aware training, micro voxels whose samples never
+                                 // weighed (T alpha) this much in the per-CV phase are emptied; 0: keep all
   float prune_cv_weight = 0.2f;  // then also every coarse voxel none of whose samples weighed this much
-                                // (floaters: each occupied coarse voxel is an MLP the chip loads); 0: off
+                                 // (floaters: each occupied coarse voxel is an MLP the chip loads); 0: off
 
   // --- quantization ---
   int quant_refit_every = 16;  // steps between refits of the INT4 feature ranges
