@@ -109,6 +109,7 @@ void TrainConfig::validate() const {
     fail("train config: max_rays {} is over the limit of {} rays per step", max_rays, kMaxRaysPerStep);
   if (!(lr_features > 0.f) || !(lr_mlp > 0.f)) fail("train config: learning rates must be positive");
   if (!(lr_final > 0.f && lr_final <= 1.f)) fail("train config: lr_final must be in (0, 1]");
+  if (!(qat_lr_scale > 0.f && qat_lr_scale <= 100.f)) fail("train config: qat_lr_scale must be in (0, 100]");
   if (lr_warmup < 0) fail("train config: lr_warmup must not be negative");
   if (!(adam_beta1 >= 0.f && adam_beta1 < 1.f && adam_beta2 >= 0.f && adam_beta2 < 1.f && adam_eps > 0.f))
     fail("train config: Adam needs 0 <= beta < 1 and eps > 0");
@@ -138,7 +139,8 @@ void TrainConfig::validate() const {
   if (mlp_equalize > 0.f && mlp_tie_weight > 0.f)
     fail(
         "train config: mlp_equalize and mlp_tie_weight cannot both be on: equalization rescales each MLP's hidden "
-        "units differently, so the MLPs' mean the tie pulls toward is no longer a meaningful MLP (set mlp_equalize: 0 to use the tie)");
+        "units differently, so the MLPs' mean the tie pulls toward is no longer a meaningful MLP (set mlp_equalize: 0 "
+        "to use the tie)");
   if (downscale < 1) fail("train config: downscale must be at least 1");
   for (float b : background)
     if (!(b >= 0.f && b <= 1.f)) fail("train config: background values must be in [0, 1]");
@@ -215,6 +217,7 @@ const std::map<std::string, Field>& fields() {
       {"lr_features", scalar(&TrainConfig::lr_features)},
       {"lr_mlp", scalar(&TrainConfig::lr_mlp)},
       {"lr_final", scalar(&TrainConfig::lr_final)},
+      {"qat_lr_scale", scalar(&TrainConfig::qat_lr_scale)},
       {"lr_warmup", scalar(&TrainConfig::lr_warmup)},
       {"adam_beta1", scalar(&TrainConfig::adam_beta1)},
       {"adam_beta2", scalar(&TrainConfig::adam_beta2)},

@@ -145,7 +145,7 @@ void Trainer::State::do_step() {
   for (size_t s = 0; s < b.n_samples; ++s)
     if (b.active[s]) active_ids.push_back(int32_t(s));
   GradientSlabs slabs;
-  const float lr = lr_factor(step);
+  const float lr = lr_factor(step) * (phase == Phase::Quantize ? cfg.qat_lr_scale : 1.f);
   if (phase == Phase::Main) {
     slabs.build(cfg.micro_res, pyramid.slab_micro(), active_ids, b.micro);
     pyramid.scatter_gradients(slabs, b.pos, b.micro, b.d_feat);

@@ -294,6 +294,22 @@ TEST(Train, EqualizedMlpsRenderWhatTheMlpsRenderedBefore) {
   EXPECT_LT(m, 1e-4f);
 }
 
+TEST(Train, QatLearningRateScaleActsInTheQuantizationPhaseOnly) {
+  // qat_lr_scale multiplies the learning rate once quantization-aware
+  // training starts: the float model (the snapshot taken then) is the same,
+  // the quantized one is not.
+  const Dataset data = load("train");
+  TrainConfig scaled = short_config();
+  scaled.qat_lr_scale = 4.f;
+  Trainer a(data, short_config()), b(data, scaled);
+  ASSERT_TRUE(a.run({}));
+  ASSERT_TRUE(b.run({}));
+  const SceneModel fa = a.export_model(false), fb = b.export_model(false);
+  EXPECT_EQ(fa.features_f32, fb.features_f32);
+  EXPECT_EQ(fa.mlps_f32, fb.mlps_f32);
+  EXPECT_NE(model_bytes(a, true), model_bytes(b, true));
+}
+
 TEST(Train, CoarseVoxelPruningDropsWholeCoarseVoxelsAndTheirMlps) {
   // prune_cv_weight empties every coarse voxel whose samples never weighed
   // that much (here 2 of the scene's 8 coarse voxels reach 0.2), with their
