@@ -240,6 +240,7 @@ const std::map<std::string, Field>& fields() {
       {"prune_cv_weight", scalar(&TrainConfig::prune_cv_weight)},
       {"quant_refit_every", scalar(&TrainConfig::quant_refit_every)},
       {"mlp_equalize", scalar(&TrainConfig::mlp_equalize)},
+      {"calibrate_activations", scalar(&TrainConfig::calibrate_activations)},
       {"max_state_gib", scalar(&TrainConfig::max_state_gib)},
       {"seed", scalar(&TrainConfig::seed)},
       {"downscale", scalar(&TrainConfig::downscale)},

@@ -74,10 +74,12 @@ struct TrainConfig {
                                  // (floaters: each occupied coarse voxel is an MLP the chip loads); 0: off
 
   // --- quantization ---
-  int quant_refit_every = 16;  // steps between refits of the INT4 feature ranges
-  float mlp_equalize = 0.5f;   // at the start of quantization, cross-layer equalization of every MLP's hidden
-                               // units (equalize_mlp in mlp_kernels.h): 0 off, 1 full; the same function,
-                               // less INT8 error; not with mlp_tie_weight
+  int quant_refit_every = 16;         // steps between refits of the INT4 feature ranges
+  float mlp_equalize = 0.5f;          // at the start of quantization, cross-layer equalization of every MLP's hidden
+                                      // units (equalize_mlp in mlp_kernels.h): 0 off, 1 full; the same function,
+                                      // less INT8 error; not with mlp_tie_weight
+  bool calibrate_activations = true;  // the exported INT8 MLPs' input steps chosen from the training rays'
+                                      // samples (train/calibrate.h) instead of the largest input seen
 
   // --- memory ---
   // The trainer's state (feature pyramid, occupancy, feature blocks with their

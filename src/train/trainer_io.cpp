@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "train/calibrate.h"
 #include "train/checkpoint_io.h"
 #include "train/mlp_kernels.h"
 #include "train/rng.h"
@@ -114,6 +115,14 @@ SceneModel Trainer::State::make_model(bool quantized) const {
   if (quantized) meta["train_psnr_quantized_db"] = std::round(psnr_quantized * 100) / 100;
   m.metadata_json = meta.dump();
   m.finalize();
+  if (quantized && cfg.calibrate_activations) {
+    std::vector<Camera> cameras;
+    for (const auto& f : data.frames) cameras.push_back(f.camera);
+    CalibrationSettings cs;
+    cs.step_micro = cfg.step_micro;
+    cs.transmittance_min = cfg.transmittance_min;
+    calibrate_activation_scales(m, cameras, cs);
+  }
   return m;
 }
 

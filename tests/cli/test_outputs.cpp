@@ -234,6 +234,33 @@ TEST_F(Outputs, RepeatedConfigsApplyInOrder) {
   EXPECT_FALSE(fs::exists(dir_ / "b.edrnr"));
 }
 
+// `edrnr calibrate` on a model trained without activation calibration gives
+// the bytes training with it exports (the trainer calls the same function
+// on the same cameras), and refuses what it cannot calibrate.
+TEST_F(Outputs, CalibrateGivesWhatTrainingWithCalibrationExports) {
+  const std::string data = dataset();
+  const fs::path off = dir_ / "no-calibration.yaml";
+  write_file_atomic(off, std::string("calibrate_activations: false\n"));
+  const fs::path plain = dir_ / "plain.edrnr", cal = dir_ / "cal.edrnr", trained = dir_ / "trained.edrnr";
+  RunResult r = run("train " + data + " -o " + plain.string() + " --iters 40 --threads 1 --config " + tiny_config() +
+                    " --config " + off.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = run("train " + data + " -o " + trained.string() + " --iters 40 --threads 1 --config " + tiny_config());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = run("calibrate " + plain.string() + " " + data + " -o " + cal.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("layer input steps changed"), std::string::npos) << r.out;
+  EXPECT_EQ(read_file_bytes(cal), read_file_bytes(trained));
+  EXPECT_NE(read_file_bytes(cal), read_file_bytes(plain));
+  // A missing model, a missing dataset: an error naming it, nothing written.
+  r = run("calibrate " + (dir_ / "missing.edrnr").string() + " " + data + " -o " + cal.string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("missing.edrnr"), std::string::npos) << r.err;
+  r = run("calibrate " + plain.string() + " " + (dir_ / "nodata").string() + " -o " + (dir_ / "c2.edrnr").string());
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_FALSE(fs::exists(dir_ / "c2.edrnr"));
+}
+
 // SIGTERM stops training with a checkpoint, as SIGINT does, and the run
 // resumes from it. The signal is raised, blocked, before edrnr starts, so it
 // arrives exactly when edrnr is ready for it (no timing).

@@ -15,6 +15,7 @@
 #include "model/procedural.h"
 #include "render/reference.h"
 #include "temp_dir.h"
+#include "train/calibrate.h"
 #include "train/config.h"
 #include "train/images.h"
 #include "train/synthetic.h"
@@ -294,6 +295,40 @@ TEST(Train, EqualizedMlpsRenderWhatTheMlpsRenderedBefore) {
   EXPECT_LT(m, 1e-4f);
 }
 
+TEST(Train, ActivationCalibrationDoesNotDependOnTheStepItStartsFrom) {
+  // The exported model's INT8 input steps are calibrated (the default). The
+  // same model with every step 8 times coarser calibrates back to the same
+  // steps (the candidates are relative to the starting step, and 8 = 2^(12/4)
+  // lies inside their range), for any thread count, and says so in its metadata.
+  const Trained& t = trained();
+  const Dataset data = load("train");
+  std::vector<Camera> cameras;
+  for (const auto& f : data.frames) cameras.push_back(f.camera);
+  ASSERT_NE(t.quantized.metadata_json.find("activation_calibration"), std::string::npos);
+  SceneModel coarse = t.quantized;
+  for (auto& q : coarse.mlps_q8)
+    for (auto* net : {&q.density, &q.color})
+      for (auto& l : *net) l.in_scale *= 8.f;
+  SceneModel one = coarse, two = coarse;
+  CalibrationSettings s;
+  s.threads = 1;
+  const CalibrationReport r = calibrate_activation_scales(one, cameras, s);
+  s.threads = 2;
+  calibrate_activation_scales(two, cameras, s);
+  EXPECT_EQ(serialize_model(one), serialize_model(two));
+  EXPECT_GT(r.samples, 1000);
+  EXPECT_EQ(r.layers, int(t.quantized.mlp_count() * (t.quantized.mlps_q8[0].density.size() + 2)));
+  EXPECT_LT(r.mean_step_log2, -2.0);  // about -3: back from 8x
+  int compared = 0;
+  for (size_t m = 0; m < one.mlps_q8.size(); ++m)
+    for (size_t l = 0; l < one.mlps_q8[m].color.size(); ++l) {
+      const float want = t.quantized.mlps_q8[m].color[l].in_scale, got = one.mlps_q8[m].color[l].in_scale;
+      EXPECT_NEAR(got / want, 1.f, 1e-3f) << "MLP " << m << " colour layer " << l;
+      ++compared;
+    }
+  EXPECT_GT(compared, 0);
+}
+
 TEST(Train, QatLearningRateScaleActsInTheQuantizationPhaseOnly) {
   // qat_lr_scale multiplies the learning rate once quantization-aware
   // training starts: the float model (the snapshot taken then) is the same,
@@ -424,7 +459,8 @@ TEST(Train, DefaultPresetIsTheBuiltInDefaultsAndTheEarlierPresetsWithTheirOverla
   const TrainConfig base2 = load_train_config(train_dir / "base-v2.yaml");
   EXPECT_EQ(to_yaml(load_train_config(ablation / "per-cv-0.3-distortion-0.01.yaml", base1)), to_yaml(base2));
   TrainConfig overlays = base2;
-  for (const char* o : {"lr-2x-per-cv-0.45.yaml", "mlp-equalize-0.5.yaml", "prune-cv-0.2.yaml"})
+  for (const char* o :
+       {"lr-2x-per-cv-0.45.yaml", "mlp-equalize-0.5.yaml", "prune-cv-0.2.yaml", "calibrate-activations.yaml"})
     overlays = load_train_config(ablation / o, overlays);
   EXPECT_EQ(to_yaml(overlays), to_yaml(preset));
 }
