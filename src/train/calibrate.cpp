@@ -136,16 +136,15 @@ CalibrationReport calibrate_activation_scales(SceneModel& model, const std::vect
               float* out = xs + (l + 1) * kMlpEvalMaxWidth;
               dense(net.density[l], xs + l * kMlpEvalMaxWidth, out, l + 1 < nd);
             }
-            const float* geo = xs + nd * kMlpEvalMaxWidth;
-            const float raw_sigma = geo[0];
-            const int G = net.density.back().out;
-            float* cin = xs + nd * kMlpEvalMaxWidth;  // the density output, then the direction encoding
-            std::copy(dir_enc.begin(), dir_enc.end(), cin + G);
+            // The colour net's input: the density output (raw density first), then the direction encoding.
+            float* cin = xs + nd * kMlpEvalMaxWidth;
+            const float raw_sigma = cin[0];
+            std::copy(dir_enc.begin(), dir_enc.end(), cin + net.density.back().out);
             for (size_t l = 0; l < net.color.size(); ++l) {
               float* out = xs + (nd + l + 1) * kMlpEvalMaxWidth;
               dense(net.color[l], xs + (nd + l) * kMlpEvalMaxWidth, out, l + 1 < net.color.size());
             }
-            const float* logit = xs + (nl)*kMlpEvalMaxWidth;
+            const float* logit = xs + nl * kMlpEvalMaxWidth;
             // What an error costs the image: a colour error is scaled by the
             // sample's weight T alpha and the sigmoid's slope; a density error
             // by T times d(alpha)/d(raw density) = tau exp(-tau).
