@@ -134,6 +134,8 @@ void TrainConfig::validate() const {
   if (!(aabb_keep > 0.f && aabb_keep <= 1.f)) fail("train config: aabb_keep must be in (0, 1]");
   if (!(prune_weight >= 0.f && prune_weight < 1.f)) fail("train config: prune_weight must be in [0, 1)");
   if (!(prune_cv_weight >= 0.f && prune_cv_weight < 1.f)) fail("train config: prune_cv_weight must be in [0, 1)");
+  if (!(prune_part_fraction >= 0.f && prune_part_fraction <= 1.f))
+    fail("train config: prune_part_fraction must be in [0, 1]");
   if (quant_refit_every < 1) fail("train config: quant_refit_every must be at least 1");
   if (!(mlp_equalize >= 0.f && mlp_equalize <= 1.f)) fail("train config: mlp_equalize must be in [0, 1]");
   if (mlp_equalize > 0.f && mlp_tie_weight > 0.f)
@@ -238,6 +240,7 @@ const std::map<std::string, Field>& fields() {
       {"aabb_keep", scalar(&TrainConfig::aabb_keep)},
       {"prune_weight", scalar(&TrainConfig::prune_weight)},
       {"prune_cv_weight", scalar(&TrainConfig::prune_cv_weight)},
+      {"prune_part_fraction", scalar(&TrainConfig::prune_part_fraction)},
       {"quant_refit_every", scalar(&TrainConfig::quant_refit_every)},
       {"mlp_equalize", scalar(&TrainConfig::mlp_equalize)},
       {"calibrate_activations", scalar(&TrainConfig::calibrate_activations)},

@@ -68,10 +68,13 @@ struct TrainConfig {
   float aabb_keep = 0.35f;         // filtered occupancy kept in the AABB
 
   // --- pruning ---
-  float prune_weight = 1e-3f;    // at the start of quantization-aware training, micro voxels whose samples never
-                                 // weighed (T alpha) this much in the per-CV phase are emptied; 0: keep all
-  float prune_cv_weight = 0.2f;  // then also every coarse voxel none of whose samples weighed this much
-                                 // (floaters: each occupied coarse voxel is an MLP the chip loads); 0: off
+  float prune_weight = 1e-3f;         // at the start of quantization-aware training, micro voxels whose samples never
+                                      // weighed (T alpha) this much in the per-CV phase are emptied; 0: keep all
+  float prune_cv_weight = 0.2f;       // then also every coarse voxel none of whose samples weighed this much
+                                      // (floaters: each occupied coarse voxel is an MLP the chip loads); 0: off
+  float prune_part_fraction = 0.01f;  // then also every connected part of the occupied micro voxels smaller than
+                                      // this fraction of the largest and apart from the box around the larger
+                                      // ones (floaters that widen the AABB; train/occupancy.h); 0: off
 
   // --- quantization ---
   int quant_refit_every = 16;         // steps between refits of the INT4 feature ranges

@@ -87,6 +87,70 @@ bool OccupancyGrid::update_aabb(float threshold, float filter_sigma, float keep)
   return true;
 }
 
+size_t drop_outlying_parts(Bitmap3& micro, float min_fraction) {
+  if (!(min_fraction > 0.f)) return 0;
+  const int res = micro.res();
+  struct Part {
+    size_t first = 0, count = 0;  // range in `voxels`
+    Vec3i lo, hi;                 // inclusive micro bounds
+  };
+  std::vector<Part> parts;
+  std::vector<uint32_t> voxels;  // every occupied voxel, grouped by part
+  voxels.reserve(micro.count());
+  Bitmap3 seen(res);
+  const auto& words = micro.words();
+  for (size_t wi = 0; wi < words.size(); ++wi)
+    for (uint64_t w = words[wi]; w; w &= w - 1) {
+      const size_t start = wi * 64 + size_t(__builtin_ctzll(w));
+      if (seen.get(start)) continue;
+      Part part;
+      part.first = voxels.size();
+      part.lo = {res, res, res};
+      part.hi = {-1, -1, -1};
+      seen.set(start);
+      voxels.push_back(uint32_t(start));
+      // Breadth first: `voxels` from part.first on is the queue.
+      for (size_t q = part.first; q < voxels.size(); ++q) {
+        const size_t i = voxels[q];
+        const Vec3i p{int(i % size_t(res)), int((i / size_t(res)) % size_t(res)), int(i / (size_t(res) * res))};
+        part.lo = vmin(part.lo, p);
+        part.hi = vmax(part.hi, p);
+        for (int dz = -1; dz <= 1; ++dz)
+          for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+              const int x = p.x + dx, y = p.y + dy, z = p.z + dz;
+              if (x < 0 || y < 0 || z < 0 || x >= res || y >= res || z >= res) continue;
+              const size_t j = micro.index(x, y, z);
+              if (micro.get(j) && !seen.get(j)) {
+                seen.set(j);
+                voxels.push_back(uint32_t(j));
+              }
+            }
+      }
+      part.count = voxels.size() - part.first;
+      parts.push_back(part);
+    }
+  size_t largest = 0;
+  for (const Part& p : parts) largest = std::max(largest, p.count);
+  const double min_count = double(min_fraction) * double(largest);
+  Vec3i lo{res, res, res}, hi{-1, -1, -1};
+  for (const Part& p : parts)
+    if (double(p.count) >= min_count) {
+      lo = vmin(lo, p.lo);
+      hi = vmax(hi, p.hi);
+    }
+  size_t emptied = 0;
+  for (const Part& p : parts) {
+    if (double(p.count) >= min_count) continue;
+    const bool apart =
+        p.hi.x < lo.x || p.hi.y < lo.y || p.hi.z < lo.z || p.lo.x > hi.x || p.lo.y > hi.y || p.lo.z > hi.z;
+    if (!apart) continue;
+    for (size_t k = p.first; k < p.first + p.count; ++k) micro.set(size_t(voxels[k]), false);
+    emptied += p.count;
+  }
+  return emptied;
+}
+
 std::vector<float> gaussian_filter3(const std::vector<float>& grid, int res, float sigma_voxels) {
   const int radius = std::max(1, int(std::ceil(3.f * sigma_voxels)));
   std::vector<float> k(size_t(2 * radius + 1));

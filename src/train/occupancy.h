@@ -46,6 +46,14 @@ struct OccupancyGrid {
   bool update_aabb(float threshold, float filter_sigma, float keep);
 };
 
+// Empties the connected parts (26-neighbour) of the occupied micro voxels
+// that hold fewer than min_fraction of the largest part's voxels and lie
+// wholly outside the box around the larger parts: floaters away from the
+// object, which would otherwise widen its AABB. Small parts inside or
+// touching that box stay (fine detail of the object). Deterministic.
+// Returns the number of micro voxels emptied; min_fraction <= 0: none.
+size_t drop_outlying_parts(Bitmap3& micro, float min_fraction);
+
 // Separable Gaussian filter of a res^3 grid (x fastest), zero outside.
 std::vector<float> gaussian_filter3(const std::vector<float>& grid, int res, float sigma_voxels);
 

@@ -172,13 +172,15 @@ void Trainer::State::freeze() {
   mlp_v.assign(mlp_params.size(), 0.f);
   feature_adam_t = 0;
   mlp_adam_t = 0;
-  if (cfg.prune_weight > 0.f || cfg.prune_cv_weight > 0.f) max_weight.assign(occ.density.size(), 0.f);
+  if (cfg.prune_weight > 0.f || cfg.prune_cv_weight > 0.f || cfg.prune_part_fraction > 0.f)
+    max_weight.assign(occ.density.size(), 0.f);
   phase = Phase::PerCv;
 }
 
 // Empties the micro voxels whose samples never weighed prune_weight in the
-// per-CV phase (the inside of solids, faint fog), drops the blocks and MLPs
-// left without occupied voxels, and tightens the AABB.
+// per-CV phase (the inside of solids, faint fog), the coarse voxels below
+// prune_cv_weight and the small parts apart from the object, drops the
+// blocks and MLPs left without occupied voxels, and tightens the AABB.
 void Trainer::State::prune() {
   const int R = cfg.micro_res;
   Bitmap3 kept(R);
@@ -197,7 +199,6 @@ void Trainer::State::prune() {
           float& peak = cv_peak[linear_index(x / kCv, y / kCv, z / kCv, cr)];
           peak = std::max(peak, max_weight[i]);
         }
-  Vec3i lo{R, R, R}, hi{-1, -1, -1};
   for (int z = 0; z < R; ++z)
     for (int y = 0; y < R; ++y)
       for (int x = 0; x < R; ++x) {
@@ -206,9 +207,17 @@ void Trainer::State::prune() {
         if (cfg.prune_cv_weight > 0.f && cv_peak[linear_index(x / kCv, y / kCv, z / kCv, cr)] < cfg.prune_cv_weight)
           continue;
         kept.set(i);
-        lo = vmin(lo, Vec3i{x, y, z});
-        hi = vmax(hi, Vec3i{x, y, z});
       }
+  // Small parts away from the object (floaters at the scene box's edge).
+  drop_outlying_parts(kept, cfg.prune_part_fraction);
+  Vec3i lo{R, R, R}, hi{-1, -1, -1};
+  for (int z = 0; z < R; ++z)
+    for (int y = 0; y < R; ++y)
+      for (int x = 0; x < R; ++x)
+        if (kept.get(x, y, z)) {
+          lo = vmin(lo, Vec3i{x, y, z});
+          hi = vmax(hi, Vec3i{x, y, z});
+        }
   max_weight.clear();
   max_weight.shrink_to_fit();
   if (hi.x < 0) return;  // nothing would remain: keep the occupancy as it is

@@ -8,6 +8,7 @@
 
 #include "train/feature_grid.h"
 #include "train/mlp_kernels.h"
+#include "train/occupancy.h"
 #include "train/rng.h"
 #include "train/volume.h"
 
@@ -734,6 +735,45 @@ TEST(FeatureGrid, QuantizedBlockGradientIsStraightThrough) {
   b.interpolate({0.f, 0.f, 0.f}, {0, 0, 0}, fb);
   EXPECT_EQ(fb[0], b.quantization()[0].fake(values[0]));
   EXPECT_NE(fa[0], fb[0]);
+}
+
+TEST(Occupancy, OutlyingPartsAreDroppedAndPartsInsideTheObjectsBoxKept) {
+  Bitmap3 m(64);
+  auto fill = [&](Vec3i lo, Vec3i hi) {  // inclusive
+    for (int z = lo.z; z <= hi.z; ++z)
+      for (int y = lo.y; y <= hi.y; ++y)
+        for (int x = lo.x; x <= hi.x; ++x) m.set(x, y, z);
+  };
+  // The object: a 30 x 30 x 2 plate and a 2 x 2 x 28 pillar on it (1912
+  // voxels, box [10, 39]^3), and a voxel touching the plate's corner by a
+  // corner only (26-neighbour: part of the object, so the box starts at 9).
+  fill({10, 10, 10}, {39, 39, 11});
+  fill({10, 10, 12}, {11, 11, 39});
+  m.set(9, 9, 9);
+  fill({25, 25, 25}, {26, 26, 26});  // 8 voxels inside the object's box, apart from it: kept
+  fill({39, 30, 30}, {41, 30, 30});  // 3 voxels reaching out of the box: kept
+  fill({0, 50, 0}, {7, 57, 0});      // 64 voxels, above 1 % of the object: a part of its own, kept
+  fill({50, 50, 50}, {51, 51, 51});  // 8 voxels apart from every larger part: dropped
+  m.set(63, 0, 0);                   // a lone voxel: dropped
+  const size_t before = m.count();
+  ASSERT_EQ(before, 1913u + 8 + 3 + 64 + 8 + 1);
+  Bitmap3 off = m;
+  EXPECT_EQ(drop_outlying_parts(off, 0.f), 0u);
+  EXPECT_EQ(off, m);
+  EXPECT_EQ(drop_outlying_parts(m, 0.01f), 9u);
+  EXPECT_EQ(m.count(), before - 9);
+  EXPECT_FALSE(m.get(50, 50, 50));
+  EXPECT_FALSE(m.get(51, 51, 51));
+  EXPECT_FALSE(m.get(63, 0, 0));
+  EXPECT_TRUE(m.get(9, 9, 9));
+  EXPECT_TRUE(m.get(25, 25, 25));
+  EXPECT_TRUE(m.get(41, 30, 30));
+  EXPECT_TRUE(m.get(7, 57, 0));
+  // At 5 % the 64-voxel part (3.3 %) is apart too; the 8-voxel part inside
+  // the object's box still stays.
+  EXPECT_EQ(drop_outlying_parts(m, 0.05f), 64u);
+  EXPECT_TRUE(m.get(25, 25, 25));
+  EXPECT_FALSE(m.get(7, 57, 0));
 }
 
 }  // namespace
