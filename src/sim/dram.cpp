@@ -118,7 +118,7 @@ bool DramSystem::can_accept(uint64_t address, uint32_t bytes) const {
   std::fill(channel_count_.begin(), channel_count_.end(), 0);
   for (uint64_t b = first; b <= last; ++b) {
     uint32_t ch = locate(b << burst_shift_).channel;
-    if (channels_[ch].queue.size() + ++channel_count_[ch] > config_.queue_depth_bursts) return false;
+    if (channels_[ch].queued_bursts + ++channel_count_[ch] > config_.queue_depth_bursts) return false;
   }
   return true;
 }
@@ -131,6 +131,11 @@ bool DramSystem::enqueue(DramOp op, uint64_t address, uint32_t bytes, uint64_t i
   }
   uint64_t first = address >> burst_shift_;
   uint64_t last = (address + bytes - 1) >> burst_shift_;
+  if (config_.channels == 1 && last - first + 1 <= config_.queue_depth_bursts &&
+      channels_[0].queued_bursts + (last - first + 1) > config_.queue_depth_bursts) {
+    ++rejected_;  // the one channel is full (a caller retries every cycle: keep this cheap)
+    return false;
+  }
   std::fill(channel_count_.begin(), channel_count_.end(), 0);
   if (config_.channels == 1) {
     channel_count_[0] = uint32_t(last - first + 1);  // every burst in the one channel
@@ -145,7 +150,7 @@ bool DramSystem::enqueue(DramOp op, uint64_t address, uint32_t bytes, uint64_t i
       fail("DRAM request {} at 0x{:x} of {} bytes needs {} bursts in channel {}, more than queue_depth_bursts = {}", id,
            address, bytes, channel_count_[ch], ch, config_.queue_depth_bursts);
     }
-    if (channels_[ch].queue.size() + channel_count_[ch] > config_.queue_depth_bursts) fits = false;
+    if (channels_[ch].queued_bursts + channel_count_[ch] > config_.queue_depth_bursts) fits = false;
   }
   if (!fits) {
     ++rejected_;
@@ -157,18 +162,31 @@ bool DramSystem::enqueue(DramOp op, uint64_t address, uint32_t bytes, uint64_t i
   req.bursts_left = static_cast<uint32_t>(last - first + 1);
   req.last_done = 0;
   ++requests_in_flight_;
-  for (uint64_t b = first; b <= last; ++b) {
-    Burst burst;
-    burst.request = slot;
-    burst.op = op;
-    burst.loc = locate(b << burst_shift_);
-    Channel& ch = channels_[burst.loc.channel];
-    Bank& bank = ch.ranks[burst.loc.rank].banks[burst.loc.bank];
-    ++bank.queued;
-    if (bank.open_row == burst.loc.row) ++(op == DramOp::kRead ? bank.hit_reads : bank.hit_writes);
-    ch.queue.push_back(burst);
+  Burst run;  // the run being gathered (count 0: none yet)
+  run.count = 0;
+  auto flush = [&] {
+    Channel& ch = channels_[run.loc.channel];
+    Bank& bank = ch.ranks[run.loc.rank].banks[run.loc.bank];
+    bank.queued += run.count;
+    if (bank.open_row == run.loc.row) (op == DramOp::kRead ? bank.hit_reads : bank.hit_writes) += run.count;
+    ch.queued_bursts += run.count;
+    ch.queue.push_back(run);
     ch.wake = 0;
+  };
+  for (uint64_t b = first; b <= last; ++b) {
+    const DramLocation loc = locate(b << burst_shift_);
+    if (run.count > 0 && loc.channel == run.loc.channel && loc.rank == run.loc.rank && loc.bank == run.loc.bank &&
+        loc.row == run.loc.row && loc.column == run.loc.column + run.count) {
+      ++run.count;
+      continue;
+    }
+    if (run.count > 0) flush();
+    run.request = slot;
+    run.op = op;
+    run.loc = loc;
+    run.count = 1;
   }
+  flush();
   return true;
 }
 
@@ -332,7 +350,13 @@ bool DramSystem::issue_one(uint32_t ch_index) {
       issue_cas(ch_index, *it);
       --bank.queued;
       --(it->op == DramOp::kRead ? bank.hit_reads : bank.hit_writes);
-      ch.queue.erase(it);
+      --ch.queued_bursts;
+      if (--it->count == 0) {
+        ch.queue.erase(it);
+      } else {  // the run's next burst
+        ++it->loc.column;
+        it->caused_activate = it->caused_precharge = false;
+      }
       return true;
     }
   }
@@ -402,7 +426,7 @@ void DramSystem::issue_activate(uint32_t ch_index, Burst& b) {
   ++rank.open_banks;
   for (const Burst& q : channels_[ch_index].queue)
     if (q.loc.rank == b.loc.rank && q.loc.bank == b.loc.bank && q.loc.row == b.loc.row)
-      ++(q.op == DramOp::kRead ? bank.hit_reads : bank.hit_writes);
+      (q.op == DramOp::kRead ? bank.hit_reads : bank.hit_writes) += q.count;
   bank.cas_ready = t + config_.tRCD;
   bank.pre_ready = std::max(bank.pre_ready, t + config_.tRAS);
   bank.act_ready = t + config_.tRC;

@@ -148,16 +148,22 @@ class DramSystem {
     uint64_t refresh_end = 0;  // REF issued: busy until this cycle
     bool refresh_pending = false;
   };
+  // Queued bursts of one request that follow each other in the queue and
+  // differ only in the column (consecutive): they share every readiness
+  // condition, so the scheduler meets the first of them before the others
+  // and they issue in order. One entry stands for them all.
   struct Burst {
     uint64_t request = 0;  // index into requests_ slot
     DramOp op = DramOp::kRead;
-    DramLocation loc;
-    bool caused_activate = false;
-    bool caused_precharge = false;
+    DramLocation loc;               // of the first burst of the run
+    uint32_t count = 1;             // bursts in the run (columns loc.column, loc.column + 1, ...)
+    bool caused_activate = false;   // the first burst's ACT / PRE (the rest
+    bool caused_precharge = false;  // then hit the row it opened)
   };
   struct Channel {
     std::vector<Rank> ranks;
-    std::deque<Burst> queue;  // arrival order
+    std::deque<Burst> queue;     // arrival order, as runs of bursts
+    uint32_t queued_bursts = 0;  // bursts in the queue
     // schedule() issues nothing before this cycle: it rescans the queue only
     // then, or when a burst arrives or a command issues in the channel.
     uint64_t wake = 0;
