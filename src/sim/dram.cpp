@@ -131,26 +131,26 @@ bool DramSystem::enqueue(DramOp op, uint64_t address, uint32_t bytes, uint64_t i
   }
   uint64_t first = address >> burst_shift_;
   uint64_t last = (address + bytes - 1) >> burst_shift_;
-  if (config_.channels == 1 && last - first + 1 <= config_.queue_depth_bursts &&
-      channels_[0].queued_bursts + (last - first + 1) > config_.queue_depth_bursts) {
-    ++rejected_;  // the one channel is full (a caller retries every cycle: keep this cheap)
-    return false;
-  }
-  std::fill(channel_count_.begin(), channel_count_.end(), 0);
+  // Whether `needed` more bursts fit channel ch's queue now (a request that
+  // could never fit is an error). A caller retries a refused request every
+  // cycle, so the one-channel case counts nothing.
+  auto room = [&](uint32_t ch, uint64_t needed) {
+    if (needed > config_.queue_depth_bursts) {
+      fail("DRAM request {} at 0x{:x} of {} bytes needs {} bursts in channel {}, more than queue_depth_bursts = {}", id,
+           address, bytes, needed, ch, config_.queue_depth_bursts);
+    }
+    return channels_[ch].queued_bursts + needed <= config_.queue_depth_bursts;
+  };
+  bool fits = true;
   if (config_.channels == 1) {
-    channel_count_[0] = uint32_t(last - first + 1);  // every burst in the one channel
+    fits = room(0, last - first + 1);
   } else {
+    std::fill(channel_count_.begin(), channel_count_.end(), 0);
     const int i = static_cast<int>(AddressField::kChannel);
     const uint64_t mask = (uint64_t{1} << field_bits_[i]) - 1;
     for (uint64_t b = first; b <= last; ++b) ++channel_count_[(b >> field_shift_[i]) & mask];
-  }
-  bool fits = true;
-  for (uint32_t ch = 0; ch < config_.channels; ++ch) {
-    if (channel_count_[ch] > config_.queue_depth_bursts) {
-      fail("DRAM request {} at 0x{:x} of {} bytes needs {} bursts in channel {}, more than queue_depth_bursts = {}", id,
-           address, bytes, channel_count_[ch], ch, config_.queue_depth_bursts);
-    }
-    if (channels_[ch].queued_bursts + channel_count_[ch] > config_.queue_depth_bursts) fits = false;
+    for (uint32_t ch = 0; ch < config_.channels; ++ch)
+      if (!room(ch, channel_count_[ch])) fits = false;
   }
   if (!fits) {
     ++rejected_;

@@ -133,15 +133,16 @@ size_t drop_outlying_parts(Bitmap3& micro, float min_fraction) {
   size_t largest = 0;
   for (const Part& p : parts) largest = std::max(largest, p.count);
   const double min_count = double(min_fraction) * double(largest);
+  auto large = [&](const Part& p) { return double(p.count) >= min_count; };
   Vec3i lo{res, res, res}, hi{-1, -1, -1};
   for (const Part& p : parts)
-    if (double(p.count) >= min_count) {
+    if (large(p)) {
       lo = vmin(lo, p.lo);
       hi = vmax(hi, p.hi);
     }
   size_t emptied = 0;
   for (const Part& p : parts) {
-    if (double(p.count) >= min_count) continue;
+    if (large(p)) continue;
     const bool apart =
         p.hi.x < lo.x || p.hi.y < lo.y || p.hi.z < lo.z || p.lo.x > hi.x || p.lo.y > hi.y || p.lo.z > hi.z;
     if (!apart) continue;
