@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 #include "chip/tme_kernel.h"
 #include "core/error.h"
@@ -217,6 +218,11 @@ void Tme::load(uint32_t cv_tag) {
   current_ = m;
   ++counters_.mlp_loads;
   counters_.mlp_load_bytes += mlps_[size_t(m)].stored_bytes;
+}
+
+void Tme::select(int32_t index) {
+  if (index < 0 || size_t(index) >= mlps_.size()) throw std::logic_error("TME select: no MLP " + std::to_string(index));
+  current_ = index;
 }
 
 void Tme::direction_input(const std::vector<int32_t>& dir_code, TmeDirection& out) const {

@@ -143,6 +143,11 @@ class Tme {
 
   // Makes the MLP of CV `cv_tag` current (a load when it is not already).
   void load(uint32_t cv_tag);
+  // The current MLP's index (-1 before the first load).
+  int32_t current_mlp() const { return current_; }
+  // Makes MLP `index` current without counting a load: for evaluating work
+  // out of order whose loads were counted in the hardware's order.
+  void select(int32_t index);
   // Evaluates the current MLP. feature: F interpolated features (CFIU
   // format); dir_code: the ray's direction encoding (encode_direction).
   TmeOutput eval(const int32_t* feature, const std::vector<int32_t>& dir_code);

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <stdexcept>
 #include <utility>
 
@@ -57,6 +58,26 @@ BatchArithmetic::BatchArithmetic(const SceneModel& model, const ChipConfig& conf
       tme_(model, n, delta, size_t(config.mlp_cache_bytes)),
       vru_(n, config.transmittance_min, config.background) {}
 
+void BatchArithmetic::direction_of(RayState& ray, TmeDirection& out) {
+  if (ray.dir_input.empty()) {
+    // The front end leaves the encoding to this thread; both the codes and
+    // the inputs made from them are kept with the ray for its next batches.
+    if (ray.dir_code.empty()) ray.dir_code = Tme::encode_direction(ray.world_dir, model_.mlp_arch.dir_frequencies, n_);
+    tme_.direction_input(ray.dir_code, out);
+    ray.dir_input = out.x;
+    ray.dir_input_saturations = out.saturations;
+  } else {
+    out.x.assign(ray.dir_input.begin(), ray.dir_input.end());
+    out.saturations = ray.dir_input_saturations;
+  }
+}
+
+void BatchArithmetic::finish(RayPacket& p, Flight& f, size_t first) {
+  for (size_t i = 0; i < f.coords.size(); ++i)
+    vru_.composite(p.rays[f.rays[i]], outputs_[first + i].alpha, outputs_[first + i].rgb);
+  f.stay = has_live_ray_in(math_, model_, p, f.cv_tag);
+}
+
 void BatchArithmetic::run(RayPacket& p, Flight& f) {
   tme_.load(f.cv_tag);
   const size_t n = f.coords.size(), F = size_t(model_.feature_channels);
@@ -73,27 +94,74 @@ void BatchArithmetic::run(RayPacket& p, Flight& f) {
   for (size_t i = 0; i < n; ++i) {
     const uint8_t r = f.rays[i];
     if (dir_batch_[r] != batch_) {
-      RayState& ray = p.rays[r];
-      if (ray.dir_input.empty()) {
-        // The front end leaves the encoding to this thread; both the codes and
-        // the inputs made from them are kept with the ray for its next batches.
-        if (ray.dir_code.empty())
-          ray.dir_code = Tme::encode_direction(ray.world_dir, model_.mlp_arch.dir_frequencies, n_);
-        tme_.direction_input(ray.dir_code, dirs_[r]);
-        ray.dir_input = dirs_[r].x;
-        ray.dir_input_saturations = dirs_[r].saturations;
-      } else {
-        dirs_[r].x.assign(ray.dir_input.begin(), ray.dir_input.end());
-        dirs_[r].saturations = ray.dir_input_saturations;
-      }
+      direction_of(p.rays[r], dirs_[r]);
       dir_batch_[r] = batch_;
     }
     dir_of_sample_[i] = &dirs_[r];
     cfiu_.weighted_sum(f.block, f.coords[i], &features_[i * F]);
   }
   tme_.eval_batch(n, features_.data(), dir_of_sample_.data(), outputs_.data());
-  for (size_t i = 0; i < n; ++i) vru_.composite(p.rays[f.rays[i]], outputs_[i].alpha, outputs_[i].rgb);
-  f.stay = has_live_ray_in(math_, model_, p, f.cv_tag);
+  finish(p, f, 0);
+}
+
+void BatchArithmetic::defer(RayPacket& p, Flight& f) {
+  tme_.load(f.cv_tag);
+  f.deferred = true;
+  deferred_.push_back({&p, &f, tme_.current_mlp()});
+}
+
+void BatchArithmetic::flush() {
+  if (deferred_.empty()) return;
+  const int32_t loaded = tme_.current_mlp();
+  order_.resize(deferred_.size());
+  for (uint32_t j = 0; j < order_.size(); ++j) order_[j] = j;
+  std::stable_sort(order_.begin(), order_.end(),
+                   [&](uint32_t a, uint32_t b) { return deferred_[a].mlp < deferred_[b].mlp; });
+  const size_t F = size_t(model_.feature_channels), R = size_t(kRaysPerPacket);
+  for (size_t g0 = 0; g0 < order_.size();) {
+    const int32_t mlp = deferred_[order_[g0]].mlp;
+    size_t g1 = g0, n = 0;
+    for (; g1 < order_.size() && deferred_[order_[g1]].mlp == mlp; ++g1) n += deferred_[order_[g1]].flight->coords.size();
+    if (features_.size() < n * F) features_.resize(n * F);
+    if (outputs_.size() < n) {
+      outputs_.resize(n);
+      dir_of_sample_.resize(n);
+    }
+    // A direction slot per ray of each batch of the group (filled before any
+    // pointer into dirs_ is taken).
+    const size_t slots = (g1 - g0) * R;
+    if (dirs_.size() < slots) {
+      dirs_.resize(slots);
+      dir_batch_.resize(slots, 0);
+    }
+    ++batch_;
+    size_t s = 0;
+    for (size_t j = g0; j < g1; ++j) {
+      const Deferred& d = deferred_[order_[j]];
+      const Flight& f = *d.flight;
+      for (size_t i = 0; i < f.coords.size(); ++i, ++s) {
+        const size_t slot = (j - g0) * R + f.rays[i];
+        if (dir_batch_[slot] != batch_) {
+          direction_of(d.packet->rays[f.rays[i]], dirs_[slot]);
+          dir_batch_[slot] = batch_;
+        }
+        dir_of_sample_[s] = &dirs_[slot];
+        cfiu_.weighted_sum(f.block, f.coords[i], &features_[s * F]);
+      }
+    }
+    tme_.select(mlp);
+    tme_.eval_batch(n, features_.data(), dir_of_sample_.data(), outputs_.data());
+    s = 0;
+    for (size_t j = g0; j < g1; ++j) {
+      const Deferred& d = deferred_[order_[j]];
+      finish(*d.packet, *d.flight, s);
+      s += d.flight->coords.size();
+      d.flight->deferred = false;
+    }
+    g0 = g1;
+  }
+  tme_.select(loaded);
+  deferred_.clear();
 }
 
 // ------------------------------------------------------------ FrontEndAhead

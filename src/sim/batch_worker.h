@@ -42,6 +42,7 @@ struct Flight {
   std::vector<uint8_t> rays;              // ray of each sample
   bool stay = false;                      // a live ray is still in the CV: reschedule; else leave it
   uint64_t job = 0;                       // job sequence number
+  bool deferred = false;                  // BatchArithmetic::defer() holds it until flush()
 };
 
 // The arithmetic of batches: interpolation sums, the TME and the VRU, with
@@ -55,6 +56,15 @@ class BatchArithmetic {
   // direction inputs once per ray), then compositing in sample order; sets
   // f.stay.
   void run(chip::RayPacket& p, Flight& f);
+  // run(p, f) deferred (one thread): the MLP load is counted now, in the
+  // order run() would count it, and the arithmetic waits for flush(), which
+  // evaluates the deferred batches of each MLP as one TME batch. Every
+  // output and counter is the same as run()'s: batches of different RPs
+  // touch different rays, and an RP has one batch in flight. p and f must
+  // stay in place until flush().
+  void defer(chip::RayPacket& p, Flight& f);
+  // The arithmetic of every deferred batch; clears their `deferred`.
+  void flush();
 
   const chip::Tme& tme() const { return tme_; }
   const chip::Vru& vru() const { return vru_; }
@@ -72,6 +82,19 @@ class BatchArithmetic {
   std::vector<chip::TmeDirection> dirs_;                  // per ray of the packet
   std::vector<uint64_t> dir_batch_;                       // per ray: the batch dirs_ was computed for
   uint64_t batch_ = 0;
+  struct Deferred {
+    chip::RayPacket* packet;
+    Flight* flight;
+    int32_t mlp;
+  };
+  std::vector<Deferred> deferred_;  // in submission order
+  std::vector<uint32_t> order_;     // flush(): deferred_ grouped by MLP
+
+  // The direction inputs of `ray` into `out` (made once per ray, then kept
+  // with the ray).
+  void direction_of(chip::RayState& ray, chip::TmeDirection& out);
+  // Composites n samples of f (outputs_ from `first`) and sets f.stay.
+  void finish(chip::RayPacket& p, Flight& f, size_t first);
 };
 
 // One front-end packet: the quad ZORG issued, its packet and the TSPS

@@ -354,8 +354,10 @@ inline void Engine::step_issue() {
 
 // The batch's arithmetic starts as soon as it exists: it depends only on
 // the samples, the model and its RP's rays, and the RP has no other batch
-// in flight. The sample coordinates are computed here, for the CFIU's bank
-// reads at issue.
+// in flight. On one thread it is deferred until a batch's results are
+// needed (complete_batch), so that the deferred batches of one MLP run
+// through the TME together. The sample coordinates are computed here, for
+// the CFIU's bank reads at issue.
 inline void Engine::start_batch(uint32_t rp, uint32_t slot) {
   const SampleBatch& batch = batches_[slot];
   Flight& f = flights_[rp];
@@ -372,7 +374,7 @@ inline void Engine::start_batch(uint32_t rp, uint32_t slot) {
   if (worker_)
     f.job = worker_->submit(rp);
   else
-    arithmetic_.run(buffer_[rp], f);
+    arithmetic_.defer(buffer_[rp], f);
 }
 
 // The CFIU reads the corners of each sample from the banks now; bank
@@ -522,7 +524,10 @@ inline void Engine::step_vru() {
 
 inline void Engine::complete_batch(uint32_t rp) {
   Flight& f = flights_[rp];
-  if (worker_) worker_->wait(f.job);
+  if (worker_)
+    worker_->wait(f.job);
+  else if (f.deferred)
+    arithmetic_.flush();
   if (f.stay) {
     ++fine_reschedules_;
     rob_.reschedule(rp);
