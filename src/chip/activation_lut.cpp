@@ -109,16 +109,6 @@ ActivationLut::ActivationLut(const std::function<double(double)>& f, double lo, 
   }
 }
 
-int64_t ActivationLut::operator()(int64_t code) const {
-  const int64_t off = code - base_;
-  if (off <= 0) return table_.front();
-  const int64_t i = off >> shift_;
-  if (i >= int64_t(table_.size()) - 1) return table_.back();
-  const int64_t frac = off & ((int64_t(1) << shift_) - 1);
-  const int64_t a = table_[size_t(i)], b = table_[size_t(i + 1)];
-  return a + fx::shift_right_round((b - a) * frac, shift_, rounding_);
-}
-
 ActivationLut make_alpha_lut(double delta, int in_frac_bits, int address_bits, int out_bits, fx::Rounding rounding) {
   if (!(delta > 0.0)) fail("alpha LUT: sample spacing {} must be positive", delta);
   const double bits_ln2 = double(out_bits) * 0.6931471805599453;

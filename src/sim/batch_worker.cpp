@@ -121,7 +121,8 @@ void BatchArithmetic::flush() {
   for (size_t g0 = 0; g0 < order_.size();) {
     const int32_t mlp = deferred_[order_[g0]].mlp;
     size_t g1 = g0, n = 0;
-    for (; g1 < order_.size() && deferred_[order_[g1]].mlp == mlp; ++g1) n += deferred_[order_[g1]].flight->coords.size();
+    for (; g1 < order_.size() && deferred_[order_[g1]].mlp == mlp; ++g1)
+      n += deferred_[order_[g1]].flight->coords.size();
     if (features_.size() < n * F) features_.resize(n * F);
     if (outputs_.size() < n) {
       outputs_.resize(n);
