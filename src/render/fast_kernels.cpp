@@ -62,6 +62,8 @@ struct Scratch {
   // Int8: the direction part of the colour net's first layer per ray of a
   // segment, in accumulator units: output o of slot j at dir_q[o * kDirRow + j].
   alignas(64) float dir_q[kFastMaxWidth * kDirRow];
+  // Int8 byte form: a layer's inputs plus 128, 4 rows per word.
+  alignas(64) int32_t xq[(kFastMaxWidth / 4) * kCap];
 };
 
 // What a layer does to its sums before they are stored: nothing (mult null,
@@ -116,6 +118,78 @@ void Dense(DT d, size_t N, const float* X, int in, int i0, int i1, const float* 
   }
   if (o < out) DenseBlock<1, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
 }
+
+#if HWY_TARGET == HWY_AVX3_DL
+// acc plus, per 32-bit lane, the 4 products of u's unsigned bytes and w's
+// signed bytes (VPDPBUSD of AVX-512 VNNI; the model has its byte form only
+// where the CPU has that instruction, see FastModel::quads).
+template <class V>
+HWY_INLINE V DotBytes(V acc, V u, V w) {
+  auto r = acc.raw;
+  if constexpr (sizeof(r) == 64)
+    asm("vpdpbusd %2, %1, %0" : "+v"(r) : "v"(u.raw), "v"(w.raw));
+  else
+    asm("%{evex%} vpdpbusd %2, %1, %0" : "+v"(r) : "v"(u.raw), "v"(w.raw));
+  acc.raw = r;
+  return acc;
+}
+constexpr bool kHaveDotBytes = true;
+
+// DenseBlock in the byte form: ACC rows [o, o + NB) = epilogue(bias + W X)
+// from the inputs in xq (4 per word, plus 128) and the weight words wq,
+// whose bias words bq take the 128 back out. Every sum is an exact integer
+// in both forms, so the results are those of DenseBlock<NB, true>.
+template <int NB, class DT>
+HWY_INLINE void DenseBytesBlock(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq,
+                                int o, float* ACC, const Epilogue& e) {
+  const hn::RebindToSigned<DT> di;
+  hn::Vec<decltype(di)> acc[NB];
+  for (int k = 0; k < NB; ++k) acc[k] = hn::Set(di, bq[o + k]);
+  for (int j = 0; j < words; ++j) {
+    const auto u = hn::Load(di, xq + size_t(j) * N);
+    for (int k = 0; k < NB; ++k)
+      acc[k] = DotBytes(acc[k], u, hn::Set(di, wq[size_t(o + k) * size_t(words) + size_t(j)]));
+  }
+  for (int k = 0; k < NB; ++k) {
+    hn::Vec<DT> v = hn::ConvertTo(d, acc[k]);
+    if (e.mult) {
+      v = hn::Round(hn::Mul(v, hn::Set(d, e.mult[o + k])));
+      v = hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi));
+    }
+    hn::Store(v, d, ACC + size_t(o + k) * N);
+  }
+}
+
+// Dense<true> over inputs [0, L.q_in) in the byte form (q: the MLP's words).
+template <class DT>
+void DenseBytes(DT d, size_t N, const float* X, const FastLayer& L, const int32_t* q, float* ACC, const Epilogue& e,
+                int32_t* xq) {
+  const hn::RebindToSigned<DT> di;
+  const int words = (L.q_in + 3) / 4;
+  const auto offset = hn::Set(di, 128);
+  for (int j = 0; j < words; ++j) {
+    auto u = hn::Zero(di);
+    for (int k = 0; k < 4 && 4 * j + k < L.q_in; ++k) {
+      const auto x = hn::Add(hn::ConvertTo(di, hn::Load(d, X + size_t(4 * j + k) * N)), offset);
+      u = hn::Or(u, hn::ShiftLeftSame(x, 8 * k));
+    }
+    hn::Store(u, di, xq + size_t(j) * N);
+  }
+  const int32_t* wq = q + L.wq;
+  const int32_t* bq = q + L.bq;
+  int o = 0;
+  for (; o + 8 <= L.out; o += 8) DenseBytesBlock<8>(d, N, xq, words, wq, bq, o, ACC, e);
+  if (o + 4 <= L.out) {
+    DenseBytesBlock<4>(d, N, xq, words, wq, bq, o, ACC, e);
+    o += 4;
+  }
+  for (; o < L.out; ++o) DenseBytesBlock<1>(d, N, xq, words, wq, bq, o, ACC, e);
+}
+#else
+constexpr bool kHaveDotBytes = false;
+template <class DT>
+void DenseBytes(DT, size_t, const float*, const FastLayer&, const int32_t*, float*, const Epilogue&, int32_t*) {}
+#endif
 
 // Features of the chunk's samples from INT4 codes, 8 channels per 32-bit
 // word (F a multiple of 8), into rows of X: float values (Float) or the
@@ -235,10 +309,11 @@ void Requantize(DT d, size_t N, float* rows, int count, const float* mult, bool 
 // A net's layers from `in` into `last` (rows of the last layer's output),
 // hidden layers through a and b. Int8 with split >= 0: the first layer's
 // products of the inputs from split on (the direction) are not summed here but
-// read from dir_q (DirectionParts) at each sample's slot.
+// read from dir_q (DirectionParts) at each sample's slot. Int8 with q: the
+// layers' sums in the byte form (DenseBytes, scratch xq).
 template <bool kInt8, class DT>
-void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, const float* in, float* a, float* b,
-            float* last, int split, const float* dir_q, const int32_t* slots) {
+void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, const int32_t* q, const float* in,
+            float* a, float* b, float* last, int split, const float* dir_q, const int32_t* slots, int32_t* xq) {
   // Int8, split >= 0: dir_q points at the chunk's first slot, slots holds the
   // lanes' slots relative to it (each below the lane count).
   const float* x = in;
@@ -260,7 +335,10 @@ void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, c
       // The inputs before `split` here; those from it on (the direction)
       // were summed per ray (DirectionParts): added by the sample's slot,
       // then the epilogue.
-      Dense<true>(d, N, x, L.in, 0, split, p + L.w, p + L.b, L.out, y);
+      if (kHaveDotBytes && q)
+        DenseBytes(d, N, x, L, q, y, Epilogue(), xq);
+      else
+        Dense<true>(d, N, x, L.in, 0, split, p + L.w, p + L.b, L.out, y);
       const hn::RebindToSigned<DT> di;
       const auto lanes = hn::IndicesFromVec(d, hn::Load(di, slots));
       for (int o = 0; o < L.out; ++o) {
@@ -269,6 +347,8 @@ void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, c
         const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), q), hn::Set(d, e.mult[o])));
         hn::Store(hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi)), d, r);
       }
+    } else if (kInt8 && kHaveDotBytes && q) {
+      DenseBytes(d, N, x, L, q, y, e, xq);
     } else {
       Dense<kInt8>(d, N, x, L.in, 0, L.in, p + L.w, p + L.b, L.out, y, e);
     }
@@ -317,8 +397,8 @@ hn::Vec<DT> Sigmoid(DT d, hn::Vec<DT> x) {
 }
 
 template <bool kInt8, class DT>
-void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const float* dir, size_t ray_stride, float delta,
-               Scratch& s, FastKernelSeconds* seconds) {
+void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_t* q, const float* dir,
+               size_t ray_stride, float delta, Scratch& s, FastKernelSeconds* seconds) {
   Clock::time_point t0;
   if (seconds) t0 = Clock::now();
   const int F = fm.feature_channels, G = fm.geo_width, D = fm.dir_dims;
@@ -335,7 +415,7 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const float*
   }
 
   // Density net: its G outputs land in the first rows of the colour input.
-  RunNet<kInt8>(d, N, fm.density, p, s.a, s.a, s.b, s.cin, -1, nullptr, nullptr);
+  RunNet<kInt8>(d, N, fm.density, p, q, s.a, s.a, s.b, s.cin, -1, nullptr, nullptr, s.xq);
   hn::Vec<DT> raw = hn::Load(d, s.cin);
   if (kInt8) {
     raw = hn::Mul(raw, hn::Set(d, 1.f / 256.f));
@@ -349,7 +429,8 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const float*
   hn::Store(trans, d, s.out + N);
   // Float: the rays' direction inputs after the density outputs (Int8: in dir_q).
   if (!kInt8) GatherDirections(d, N, dir, ray_stride, s.ray, G, D, s.cin);
-  RunNet<kInt8>(d, N, fm.color, p, s.cin, s.a, s.b, s.rgb, kInt8 && D > 0 ? G : -1, s.dir_q + s.slot_base, s.slot);
+  RunNet<kInt8>(d, N, fm.color, p, q, s.cin, s.a, s.b, s.rgb, kInt8 && D > 0 ? G : -1, s.dir_q + s.slot_base, s.slot,
+                s.xq);
   for (int c = 0; c < 3; ++c) {
     hn::Vec<DT> v = hn::Load(d, s.rgb + size_t(c) * N);
     if (kInt8) v = hn::Mul(v, hn::Set(d, 1.f / 256.f));
@@ -362,9 +443,9 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const float*
 // repeats the last sample; Int8: slots[l] is lane l's slot in s.dir_q), their
 // outputs to out.
 template <bool kInt8, class DT>
-void RunChunk(DT d, const FastModel& fm, const float* p, const FastSample* samples, const uint32_t* order, size_t valid,
-              const int32_t* slots, const float* dir, size_t ray_stride, float delta, Scratch& s, FastSampleOut* out,
-              FastKernelSeconds* seconds) {
+void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, const FastSample* samples,
+              const uint32_t* order, size_t valid, const int32_t* slots, const float* dir, size_t ray_stride,
+              float delta, Scratch& s, FastSampleOut* out, FastKernelSeconds* seconds) {
   const size_t N = hn::Lanes(d);
   for (size_t l = 0; l < N; ++l) {
     const size_t i = std::min(l, valid - 1);
@@ -378,7 +459,7 @@ void RunChunk(DT d, const FastModel& fm, const float* p, const FastSample* sampl
   }
   s.slot_base = s.slot[0];
   for (size_t l = 0; l < N; ++l) s.slot[l] -= s.slot_base;
-  EvalChunk<kInt8>(d, N, fm, p, dir, ray_stride, delta, s, seconds);
+  EvalChunk<kInt8>(d, N, fm, p, q, dir, ray_stride, delta, s, seconds);
   for (size_t l = 0; l < valid; ++l) {
     FastSampleOut& o = out[order[l]];
     o.alpha = s.out[l];
@@ -395,6 +476,7 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, con
   Scratch s;
   const float* p = fm.mlp(mlp);
   const bool int8 = fm.arithmetic == FastArithmetic::Int8;
+  const int32_t* q = int8 && !fm.quads.empty() ? fm.mlp_quads(mlp) : nullptr;
   // Int8: per segment, the rays met (a new slot at each change of ray: a
   // ray's samples are consecutive) and their direction parts.
   alignas(64) uint32_t seg_rays[kSegment];
@@ -434,13 +516,13 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, con
     const int32_t* slots = seg_slot + (i0 - seg_begin);
     if (N >= 8 && valid <= hn::Lanes(dh)) {
       if (int8)
-        RunChunk<true>(dh, fm, p, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+        RunChunk<true>(dh, fm, p, q, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
       else
-        RunChunk<false>(dh, fm, p, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+        RunChunk<false>(dh, fm, p, q, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
     } else if (int8) {
-      RunChunk<true>(d, fm, p, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+      RunChunk<true>(d, fm, p, q, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
     } else {
-      RunChunk<false>(d, fm, p, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+      RunChunk<false>(d, fm, p, q, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
     }
   }
 }

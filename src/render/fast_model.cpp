@@ -87,6 +87,47 @@ void pack_int8_net(const std::vector<DenseQ>& net, const std::vector<FastLayer>&
   }
 }
 
+// The byte form of the INT8 layers (FastModel::quads), or nothing when a
+// weight is not an integer in [-128, 127] or a bias is beyond 2^23 (then the
+// float form's sums could round, and the two forms would differ).
+void pack_quads(FastModel& fm, size_t mlps) {
+  size_t offset = 0;
+  for (std::vector<FastLayer>* net : {&fm.density, &fm.color})
+    for (size_t l = 0; l < net->size(); ++l) {
+      FastLayer& L = (*net)[l];
+      L.q_in = net == &fm.color && l == 0 && fm.dir_dims > 0 ? fm.geo_width : L.in;
+      L.wq = offset;
+      offset += size_t(L.out) * size_t((L.q_in + 3) / 4);
+      L.bq = offset;
+      offset += size_t(L.out);
+    }
+  const size_t stride = (offset + 15) / 16 * 16;
+  std::vector<int32_t> quads(stride * mlps, 0);
+  for (size_t i = 0; i < mlps; ++i) {
+    const float* p = fm.mlp(i);
+    int32_t* q = quads.data() + i * stride;
+    for (const std::vector<FastLayer>* net : {&fm.density, &fm.color})
+      for (const FastLayer& L : *net) {
+        const int words = (L.q_in + 3) / 4;
+        for (int o = 0; o < L.out; ++o) {
+          int64_t sum = 0;
+          for (int k = 0; k < L.q_in; ++k) {
+            const float w = p[L.w + size_t(o) * size_t(L.in) + size_t(k)];
+            if (!(w >= -128.f && w <= 127.f && w == std::nearbyint(w))) return;
+            sum += int64_t(w);
+            const uint32_t byte = uint32_t(uint8_t(int8_t(w)));
+            q[L.wq + size_t(o) * size_t(words) + size_t(k / 4)] |= int32_t(byte << (8 * (k % 4)));
+          }
+          const float b = p[L.b + size_t(o)];
+          if (!(std::abs(b) <= float(1 << 23))) return;
+          q[L.bq + size_t(o)] = int32_t(b) - int32_t(128 * sum);
+        }
+      }
+  }
+  fm.quad_stride = stride;
+  fm.quads = std::move(quads);
+}
+
 }  // namespace
 
 FastModel pack_fast_model(const SceneModel& model, const ResolvedForm& form, FastArithmetic arithmetic) {
@@ -160,6 +201,9 @@ FastModel pack_fast_model(const SceneModel& model, const ResolvedForm& form, Fas
       pack_float_net(model.mlps_f32[i].color, fm.color, p, i, "colour");
     }
   }
+#if defined(__x86_64__) || defined(__i386__)
+  if (int8 && __builtin_cpu_supports("avx512vnni")) pack_quads(fm, n);
+#endif
   return fm;
 }
 

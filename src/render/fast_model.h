@@ -32,6 +32,12 @@ enum class FastArithmetic { Float, Int8 };
 struct FastLayer {
   int in = 0, out = 0;
   size_t w = 0, b = 0, m = 0;
+  // Int8 byte form (FastModel::quads): the first q_in inputs (the colour
+  // net's first layer: those before the direction), per output ceil(q_in / 4)
+  // words of 4 signed weight bytes (input 4j + k in byte k) at wq, and per
+  // output at bq the bias minus 128 times the sum of those weights.
+  int q_in = 0;
+  size_t wq = 0, bq = 0;
 };
 
 struct FastModel {
@@ -50,8 +56,15 @@ struct FastModel {
   std::vector<float> params;  // mlp_count * mlp_stride
   // Per channel: float features are (code - zero_point) * scale.
   std::vector<float> feature_scale, feature_zero_point;
+  // Int8: the layers in byte form (FastLayer::wq, bq) for kernels that
+  // multiply unsigned bytes (the inputs plus 128) by signed ones; empty when
+  // a weight or bias does not fit it or the CPU has no such instruction
+  // (AVX-512 VNNI): the float form is used then, with the same results.
+  size_t quad_stride = 0;
+  std::vector<int32_t> quads;
 
   const float* mlp(size_t index) const { return params.data() + index * mlp_stride; }
+  const int32_t* mlp_quads(size_t index) const { return quads.data() + index * quad_stride; }
 };
 
 // The widest layer the kernels evaluate (and the widest F and G + D).

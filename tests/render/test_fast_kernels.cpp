@@ -109,5 +109,59 @@ TEST(FastKernels, OutputsDoNotDependOnTheChunking) {
   }
 }
 
+// The INT8 layers' byte form (FastModel::quads: unsigned inputs plus 128
+// against signed weights, on CPUs with AVX-512 VNNI) gives every sample the
+// bits of the float form of the same integer sums. Where the CPU has no such
+// instruction the model has no byte form, and both runs are the float form.
+TEST(FastKernels, Int8ByteFormGivesTheFloatFormsOutputs) {
+  ProceduralOptions o;
+  o.micro_res = 64;
+  o.seed = 5;
+  const SceneModel m = make_procedural_model("several", procedural_shapes("several"), o);
+  const Batch batch = make_batch(m, 61);
+  std::vector<float> dx(kRays), dy(kRays), dz(kRays);
+  for (int r = 0; r < kRays; ++r) {
+    const double a = 0.07 * r + 0.3, b = 0.02 * r - 1.5;
+    dx[size_t(r)] = float(std::cos(a) * std::cos(b));
+    dy[size_t(r)] = float(std::sin(a) * std::cos(b));
+    dz[size_t(r)] = float(std::sin(b));
+  }
+  const FastModel bytes = pack_fast_model(m, resolve_model_form(m, ModelForm::Quantized), FastArithmetic::Int8);
+  FastModel floats = bytes;
+  floats.quads.clear();
+  if (bytes.quads.empty()) GTEST_LOG_(INFO) << "no byte form on this CPU: both runs use the float form";
+  // The byte form holds each weight once, in order, 4 to a word.
+  if (!bytes.quads.empty()) {
+    const FastLayer& L = bytes.density.front();
+    const float* p = bytes.mlp(batch.mlp);
+    const int32_t* q = bytes.mlp_quads(batch.mlp);
+    for (int k = 0; k < L.q_in; ++k)
+      EXPECT_EQ(float(int8_t(uint32_t(q[L.wq + size_t(k / 4)]) >> (8 * (k % 4)))), p[L.w + size_t(k)]) << k;
+  }
+  std::vector<float> dir(size_t(std::max(bytes.dir_dims, 1)) * kRays);
+  fast_encode_directions(bytes, dx.data(), dy.data(), dz.data(), kRays, dir.data(), kRays);
+  const size_t n = batch.samples.size();
+  std::vector<uint32_t> order(n);
+  for (size_t i = 0; i < n; ++i) order[i] = uint32_t(i);
+  const float delta = 2.f / 64.f;
+  // Whole batches and short ones (half-width vectors).
+  for (size_t len : {n, size_t(5)}) {
+    std::vector<FastSampleOut> a(n), b(n);
+    fast_eval_batch(bytes, batch.mlp, batch.samples.data(), order.data(), len, dir.data(), kRays, delta, a.data(),
+                    nullptr);
+    fast_eval_batch(floats, batch.mlp, batch.samples.data(), order.data(), len, dir.data(), kRays, delta, b.data(),
+                    nullptr);
+    int opaque = 0;
+    for (size_t i = 0; i < len; ++i) {
+      SCOPED_TRACE(testing::Message() << "len " << len << " sample " << i);
+      ASSERT_EQ(bits(a[i].alpha), bits(b[i].alpha));
+      ASSERT_EQ(bits(a[i].trans), bits(b[i].trans));
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(bits(a[i].rgb[c]), bits(b[i].rgb[c]));
+      opaque += a[i].alpha > 0.01f;
+    }
+    if (len == n) EXPECT_GT(opaque, 0);  // the samples reach the nets' later layers with something to say
+  }
+}
+
 }  // namespace
 }  // namespace edrnr
