@@ -159,7 +159,9 @@ TEST(FastKernels, Int8ByteFormGivesTheFloatFormsOutputs) {
       for (int c = 0; c < 3; ++c) ASSERT_EQ(bits(a[i].rgb[c]), bits(b[i].rgb[c]));
       opaque += a[i].alpha > 0.01f;
     }
-    if (len == n) EXPECT_GT(opaque, 0);  // the samples reach the nets' later layers with something to say
+    if (len == n) {
+      EXPECT_GT(opaque, 0);  // the samples reach the nets' later layers with something to say
+    }
   }
 }
 
