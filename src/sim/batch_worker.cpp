@@ -79,29 +79,8 @@ void BatchArithmetic::finish(RayPacket& p, Flight& f, size_t first) {
 }
 
 void BatchArithmetic::run(RayPacket& p, Flight& f) {
-  tme_.load(f.cv_tag);
-  const size_t n = f.coords.size(), F = size_t(model_.feature_channels);
-  if (features_.size() < n * F) features_.resize(n * F);
-  if (outputs_.size() < n) {
-    outputs_.resize(n);
-    dir_of_sample_.resize(n);
-  }
-  if (dirs_.size() < p.rays.size()) {
-    dirs_.resize(p.rays.size());
-    dir_batch_.resize(p.rays.size(), 0);
-  }
-  ++batch_;
-  for (size_t i = 0; i < n; ++i) {
-    const uint8_t r = f.rays[i];
-    if (dir_batch_[r] != batch_) {
-      direction_of(p.rays[r], dirs_[r]);
-      dir_batch_[r] = batch_;
-    }
-    dir_of_sample_[i] = &dirs_[r];
-    cfiu_.weighted_sum(f.block, f.coords[i], &features_[i * F]);
-  }
-  tme_.eval_batch(n, features_.data(), dir_of_sample_.data(), outputs_.data());
-  finish(p, f, 0);
+  defer(p, f);
+  flush();
 }
 
 void BatchArithmetic::defer(RayPacket& p, Flight& f) {

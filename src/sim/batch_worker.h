@@ -54,7 +54,7 @@ class BatchArithmetic {
 
   // The interpolation sums of every sample, the TME on the whole batch (the
   // direction inputs once per ray), then compositing in sample order; sets
-  // f.stay.
+  // f.stay (defer() then flush(): a group of one).
   void run(chip::RayPacket& p, Flight& f);
   // run(p, f) deferred (one thread): the MLP load is counted now, in the
   // order run() would count it, and the arithmetic waits for flush(), which
