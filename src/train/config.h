@@ -42,9 +42,9 @@ struct TrainConfig {
   // --- optimiser ---
   float lr_features = 2e-2f;
   float lr_mlp = 2e-2f;
-  float lr_final = 0.05f;    // the learning rate decays exponentially to this factor at the last step
+  float lr_final = 0.2f;       // the learning rate decays exponentially to this factor at the last step
   float qat_lr_scale = 0.33f;  // the learning rate is multiplied by this in the quantization-aware phase
-  int64_t lr_warmup = 100;   // linear warm-up steps
+  int64_t lr_warmup = 100;     // linear warm-up steps
   float adam_beta1 = 0.9f, adam_beta2 = 0.99f, adam_eps = 1e-15f;
   // Per pyramid level (coarsest first), the step from which it is read and
   // trained; before it the level's channels read zero (coarse to fine).
