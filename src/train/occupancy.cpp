@@ -53,6 +53,8 @@ void OccupancyGrid::rebuild(float threshold) {
 void OccupancyGrid::rebuild_macro() {
   macro = Bitmap3(res / kMacroCell);
   fine = Bitmap3(res / 4);
+  coarse_cell = std::max(1, std::min(kCoarseCell, res));
+  coarse = Bitmap3(res / coarse_cell);
   const auto& words = micro.words();
   // A word holds 64 consecutive x of one row (res is a multiple of 32, so a
   // word may hold two rows when res == 32).
@@ -64,6 +66,7 @@ void OccupancyGrid::rebuild_macro() {
       const int x = int(i % size_t(res)), y = int((i / size_t(res)) % size_t(res)), z = int(i / (size_t(res) * res));
       macro.set(x / kMacroCell, y / kMacroCell, z / kMacroCell);
       fine.set(x / 4, y / 4, z / 4);
+      coarse.set(x / coarse_cell, y / coarse_cell, z / coarse_cell);
     }
   }
 }

@@ -208,6 +208,10 @@ void Trainer::State::march(Batch& b) const {
         const Vec3f p = candidate(b, i, k);
         Vec3i m;
         if (!micro_voxel_of(p, cfg.micro_res, m)) continue;
+        if (!occ.coarse_occupied(m.x, m.y, m.z)) {
+          k += candidates_left_in_cell(b.mray[size_t(i)], p, m, occ.coarse_cell);
+          continue;
+        }
         if (!occ.macro_occupied(m.x, m.y, m.z)) {
           k += candidates_left_in_cell(b.mray[size_t(i)], p, m, kMacroCell);
           continue;
