@@ -7,7 +7,9 @@
 #
 # A variant is the name of an overlay in configs/train/ablation/ (applied on
 # top of the preset with a second --config), "base" (the preset alone), or
-# "iters=N" (the preset with N steps). Every run is deterministic: the same
+# "iters=N" (the preset with N steps) or "seed=S" (the preset with another
+# random seed: rays, initial values, occupancy jitter; the spread between
+# seeds is what a variant's gain must exceed). Every run is deterministic: the same
 # command gives the same model bits on any machine with the same build.
 # Runs whose model already exists in OUT_DIR are not repeated.
 set -euo pipefail
@@ -44,6 +46,7 @@ for v in $variants; do
   case $v in
     base) ;;
     iters=*) n=${v#iters=} ;;
+    seed=*) extra=(--seed "${v#seed=}") ;;
     *)
       overlay=$root/configs/train/ablation/$v.yaml
       [ -f "$overlay" ] || { echo "train-ablation: no overlay $overlay" >&2; exit 1; }
