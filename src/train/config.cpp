@@ -123,6 +123,16 @@ void TrainConfig::validate() const {
   for (int s : level_unlock_steps)
     if (s < 0) fail("train config: level_unlock_steps entry {} must not be negative", s);
   if (!(block_tv_weight >= 0.f)) fail("train config: block_tv_weight must not be negative");
+  // The largest rate a step applies (per neighbour) times the most neighbours
+  // (6 in a grid, 9 for a block vertex with its copies) stays below 1, so a
+  // step never overshoots the neighbours' mean.
+  const float max_rate = lr_features * std::max(1.f, qat_lr_scale);
+  if (!(smooth_weight >= 0.f && smooth_weight * max_rate * 6.f < 1.f))
+    fail("train config: smooth_weight {} must be >= 0 and below 1 / (6 lr_features max(1, qat_lr_scale)) = {}",
+         smooth_weight, 1.f / (6.f * max_rate));
+  if (!(block_smooth_weight >= 0.f && block_smooth_weight * max_rate * 9.f < 1.f))
+    fail("train config: block_smooth_weight {} must be >= 0 and below 1 / (9 lr_features max(1, qat_lr_scale)) = {}",
+         block_smooth_weight, 1.f / (9.f * max_rate));
   if (!(distortion_weight >= 0.f)) fail("train config: distortion_weight must not be negative");
   if (!(mlp_tie_weight >= 0.f)) fail("train config: mlp_tie_weight must not be negative");
   if (!(init_features >= 0.f)) fail("train config: init_features must not be negative");
@@ -228,6 +238,8 @@ const std::map<std::string, Field>& fields() {
       {"tv_levels", scalar(&TrainConfig::tv_levels)},
       {"level_unlock_steps", int_list(&TrainConfig::level_unlock_steps)},
       {"block_tv_weight", scalar(&TrainConfig::block_tv_weight)},
+      {"smooth_weight", scalar(&TrainConfig::smooth_weight)},
+      {"block_smooth_weight", scalar(&TrainConfig::block_smooth_weight)},
       {"distortion_weight", scalar(&TrainConfig::distortion_weight)},
       {"mlp_tie_weight", scalar(&TrainConfig::mlp_tie_weight)},
       {"init_features", scalar(&TrainConfig::init_features)},

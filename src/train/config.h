@@ -54,6 +54,14 @@ struct TrainConfig {
   float tv_weight = 0.f;        // total variation on the pyramid's finest levels (main phase)
   int tv_levels = 1;            // how many of the finest levels tv_weight applies to
   float block_tv_weight = 0.f;  // total variation on the feature blocks, copies across faces included (later phases)
+  // Decoupled smoothing (outside Adam): each step, every touched vertex of
+  // the tv_levels finest pyramid levels (main phase) or of the blocks (later
+  // phases) moves toward its neighbours by lr * weight * sum(neighbour -
+  // value), lr the step's feature learning rate. Unlike tv_weight, whose
+  // gradient Adam normalizes (a rarely seen vertex is then smoothed at the
+  // full rate), the pull is proportional to the differences.
+  float smooth_weight = 0.f;
+  float block_smooth_weight = 0.f;
   float distortion_weight = 0.01f;  // distortion loss per ray (train/volume.h), distances in scene-box edges
   float mlp_tie_weight = 0.f;       // per-CV phases: squared distance of each MLP's weights to the MLPs' mean
   float init_features = 1e-4f;      // initial feature values: uniform in +-this

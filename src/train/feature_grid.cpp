@@ -159,29 +159,78 @@ void FeaturePyramid::scatter_gradients(const GradientSlabs& slabs, const std::ve
   }
 }
 
+namespace {
+// Calls pull(u) with the values of each grid neighbour of vertex vtx of L.
+template <class Pull>
+void for_each_grid_neighbour(const PyramidLevel& L, int32_t vtx, Pull pull) {
+  const int n = L.res + 1;
+  const int coord[3] = {vtx % n, (vtx / n) % n, vtx / (n * n)};
+  const int64_t stride[3] = {1, n, int64_t(n) * n};
+  for (int a = 0; a < 3; ++a)
+    for (int s = -1; s <= 1; s += 2) {
+      const int c = coord[a] + s;
+      if (c < 0 || c >= n) continue;
+      pull(&L.value[size_t(vtx + s * stride[a]) * kLevelChannels]);
+    }
+}
+
+// The decoupled smoothing step over the touched vertices of one array of
+// `channels` values per vertex: deltas from the values before the step
+// (parallel over the touched lists), then applied.
+template <class Neighbours>
+void smooth_touched(std::vector<float>& value, const std::vector<std::vector<int32_t>>& lists, int channels, float rate,
+                    Neighbours neighbours) {
+  const int n_lists = int(lists.size());
+  std::vector<std::vector<float>> delta(static_cast<size_t>(n_lists));
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int j = 0; j < n_lists; ++j) {
+    const std::vector<int32_t>& list = lists[size_t(j)];
+    std::vector<float>& d = delta[size_t(j)];
+    d.assign(list.size() * size_t(channels), 0.f);
+    for (size_t i = 0; i < list.size(); ++i) {
+      const float* v = &value[size_t(list[i]) * size_t(channels)];
+      float* di = &d[i * size_t(channels)];
+      neighbours(list[i], [&](const float* u) {
+        for (int k = 0; k < channels; ++k) di[k] += rate * (v[k] - u[k]);
+      });
+    }
+  }
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int j = 0; j < n_lists; ++j) {
+    const std::vector<int32_t>& list = lists[size_t(j)];
+    const std::vector<float>& d = delta[size_t(j)];
+    for (size_t i = 0; i < list.size(); ++i) {
+      float* v = &value[size_t(list[i]) * size_t(channels)];
+      for (int k = 0; k < channels; ++k) v[k] -= d[i * size_t(channels) + size_t(k)];
+    }
+  }
+}
+}  // namespace
+
 void FeaturePyramid::add_tv_gradient(float weight, int levels) {
   if (!(weight > 0.f)) return;
   for (int li = std::max(0, int(levels_.size()) - levels); li < int(levels_.size()); ++li) {
     PyramidLevel& L = levels_[size_t(li)];
-    const int n = L.res + 1;
     const int n_lists = int(L.adam.touched_list.size());
 #pragma omp parallel for schedule(dynamic, 1)
     for (int j = 0; j < n_lists; ++j) {
       for (int32_t vtx : L.adam.touched_list[size_t(j)]) {
-        const int x = vtx % n, y = (vtx / n) % n, z = vtx / (n * n);
         const float* v = &L.value[size_t(vtx) * kLevelChannels];
         float* g = &L.adam.grad[size_t(vtx) * kLevelChannels];
-        const int coord[3] = {x, y, z};
-        const int64_t stride[3] = {1, n, int64_t(n) * n};
-        for (int a = 0; a < 3; ++a)
-          for (int s = -1; s <= 1; s += 2) {
-            const int c = coord[a] + s;
-            if (c < 0 || c >= n) continue;
-            const float* u = &L.value[size_t(vtx + s * stride[a]) * kLevelChannels];
-            for (int k = 0; k < kLevelChannels; ++k) g[k] += 2.f * weight * (v[k] - u[k]);
-          }
+        for_each_grid_neighbour(L, vtx, [&](const float* u) {
+          for (int k = 0; k < kLevelChannels; ++k) g[k] += 2.f * weight * (v[k] - u[k]);
+        });
       }
     }
+  }
+}
+
+void FeaturePyramid::smooth(float rate, int levels) {
+  if (!(rate > 0.f)) return;
+  for (int li = std::max(0, int(levels_.size()) - levels); li < int(levels_.size()); ++li) {
+    PyramidLevel& L = levels_[size_t(li)];
+    smooth_touched(L.value, L.adam.touched_list, kLevelChannels, rate,
+                   [&](int32_t vtx, const auto& pull) { for_each_grid_neighbour(L, vtx, pull); });
   }
 }
 
@@ -374,42 +423,53 @@ void BlockFeatures::scatter_gradients(const GradientSlabs& slabs, const std::vec
   }
 }
 
-void BlockFeatures::add_tv_gradient(float weight) {
-  if (!(weight > 0.f)) return;
+template <class Pull>
+void BlockFeatures::for_each_neighbour(int32_t vtx, Pull pull) const {
   const int F = channels_;
   const int fr = micro_res_ / kMicroPerFine;
   constexpr int n = kBlockVertsPerAxis;
   const int stride[3] = {1, n, n * n};
+  const int b = vtx / kBlockVerts, vid = vtx % kBlockVerts;
+  const int local[3] = {vid % n, (vid / n) % n, vid / (n * n)};
+  const float* v = &value_[size_t(vtx) * size_t(F)];
+  const uint32_t fi = fine_index_[size_t(b)];
+  const int fine[3] = {int(fi % uint32_t(fr)), int((fi / uint32_t(fr)) % uint32_t(fr)), int(fi / uint32_t(fr * fr))};
+  for (int a = 0; a < 3; ++a) {
+    if (local[a] > 0) pull(v - stride[a] * F);
+    if (local[a] < n - 1) pull(v + stride[a] * F);
+    // The same vertex in the block across the face it lies on.
+    const int side = local[a] == 0 ? -1 : local[a] == n - 1 ? 1 : 0;
+    if (side == 0) continue;
+    int f[3] = {fine[0], fine[1], fine[2]};
+    f[a] += side;
+    if (f[a] < 0 || f[a] >= fr) continue;
+    const int32_t nb = fine_to_block_[linear_index(f[0], f[1], f[2], fr)];
+    if (nb < 0) continue;
+    const int copy = vid - side * (n - 1) * stride[a];
+    pull(&value_[(size_t(nb) * kBlockVerts + size_t(copy)) * size_t(F)]);
+  }
+}
+
+void BlockFeatures::add_tv_gradient(float weight) {
+  if (!(weight > 0.f)) return;
+  const int F = channels_;
   const int n_lists = int(adam_.touched_list.size());
 #pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < n_lists; ++j) {
     for (int32_t vtx : adam_.touched_list[size_t(j)]) {
-      const int b = vtx / kBlockVerts, vid = vtx % kBlockVerts;
-      const int local[3] = {vid % n, (vid / n) % n, vid / (n * n)};
       const float* v = &value_[size_t(vtx) * size_t(F)];
       float* g = &adam_.grad[size_t(vtx) * size_t(F)];
-      auto pull = [&](const float* u) {
+      for_each_neighbour(vtx, [&](const float* u) {
         for (int k = 0; k < F; ++k) g[k] += 2.f * weight * (v[k] - u[k]);
-      };
-      const uint32_t fi = fine_index_[size_t(b)];
-      const int fine[3] = {int(fi % uint32_t(fr)), int((fi / uint32_t(fr)) % uint32_t(fr)),
-                           int(fi / uint32_t(fr * fr))};
-      for (int a = 0; a < 3; ++a) {
-        if (local[a] > 0) pull(v - stride[a] * F);
-        if (local[a] < n - 1) pull(v + stride[a] * F);
-        // The same vertex in the block across the face it lies on.
-        const int side = local[a] == 0 ? -1 : local[a] == n - 1 ? 1 : 0;
-        if (side == 0) continue;
-        int f[3] = {fine[0], fine[1], fine[2]};
-        f[a] += side;
-        if (f[a] < 0 || f[a] >= fr) continue;
-        const int32_t nb = fine_to_block_[linear_index(f[0], f[1], f[2], fr)];
-        if (nb < 0) continue;
-        const int copy = vid - side * (n - 1) * stride[a];
-        pull(&value_[(size_t(nb) * kBlockVerts + size_t(copy)) * size_t(F)]);
-      }
+      });
     }
   }
+}
+
+void BlockFeatures::smooth(float rate) {
+  if (!(rate > 0.f)) return;
+  smooth_touched(value_, adam_.touched_list, channels_, rate,
+                 [&](int32_t vtx, const auto& pull) { for_each_neighbour(vtx, pull); });
 }
 
 void BlockFeatures::adam_step(const AdamStep& step) {

@@ -93,6 +93,11 @@ class FeaturePyramid {
   // differences between neighbouring vertices) over the touched vertices of
   // the `levels` finest levels to their gradients. Call after scatter_gradients.
   void add_tv_gradient(float weight, int levels = 1);
+  // Decoupled smoothing of the touched vertices of the `levels` finest
+  // levels: value -= rate * sum over neighbours of (value - neighbour), all
+  // from the values before the call (the result does not depend on the
+  // thread count). Call between scatter_gradients and adam_step.
+  void smooth(float rate, int levels = 1);
 
  private:
   int micro_res_ = 0;
@@ -155,9 +160,16 @@ class BlockFeatures {
   // face-adjacent blocks (a vertex on a block face is stored once per block;
   // this keeps the copies together). Call after scatter_gradients.
   void add_tv_gradient(float weight);
+  // FeaturePyramid::smooth over the touched vertices with add_tv_gradient's
+  // neighbours (in the block, and the vertex's copies across block faces).
+  void smooth(float rate);
   void adam_step(const AdamStep& step);
 
  private:
+  // Calls pull(u) with the values of each of vertex vtx's TV neighbours.
+  template <class Pull>
+  void for_each_neighbour(int32_t vtx, Pull pull) const;
+
   int micro_res_ = 0, channels_ = 0;
   std::vector<uint32_t> fine_index_;
   std::vector<int32_t> fine_to_block_;

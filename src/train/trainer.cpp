@@ -150,6 +150,7 @@ void Trainer::State::do_step() {
     slabs.build(cfg.micro_res, pyramid.slab_micro(), active_ids, b.micro);
     pyramid.scatter_gradients(slabs, b.pos, b.micro, b.d_feat);
     pyramid.add_tv_gradient(cfg.tv_weight, cfg.tv_levels);
+    pyramid.smooth(cfg.smooth_weight * cfg.lr_features * lr, cfg.tv_levels);
     lap(kScatter);
     ++feature_adam_t;
     pyramid.adam_step(AdamStep(adam_settings(), cfg.lr_features * lr, feature_adam_t));
@@ -157,6 +158,7 @@ void Trainer::State::do_step() {
     slabs.build(cfg.micro_res, kMicroPerFine, active_ids, b.micro);
     blocks.scatter_gradients(slabs, b.pos, b.micro, b.d_feat);
     blocks.add_tv_gradient(cfg.block_tv_weight);
+    blocks.smooth(cfg.block_smooth_weight * cfg.lr_features * lr);
     lap(kScatter);
     ++feature_adam_t;
     blocks.adam_step(AdamStep(adam_settings(), cfg.lr_features * lr, feature_adam_t));

@@ -153,6 +153,50 @@ TEST(FeatureGrid, PyramidTotalVariationCoversTheFinestLevelsAsked) {
   }
 }
 
+TEST(FeatureGrid, PyramidSmoothingPullsTouchedVerticesTowardTheirNeighbours) {
+  const int R = 8;
+  FeaturePyramid pyr(R, {2, 4, 8}, 23, 0.5f);
+  const int F = pyr.channels();
+  // Samples in one corner region only: the vertices outside it are not touched.
+  const GridSamples s = samples_in_every_voxel({0, 0, 0}, {4, 4, 4}, 24);
+  std::vector<float> r(s.ids.size() * size_t(F), 1.f);
+  GradientSlabs slabs;
+  slabs.build(R, pyr.slab_micro(), s.ids, s.micro);
+  pyr.scatter_gradients(slabs, s.pos, s.micro, r);
+  std::vector<std::vector<float>> before;
+  for (const auto& L : pyr.levels()) before.push_back(L.value);
+  const float rate = 0.05f;
+  pyr.smooth(rate, 1);
+  size_t moved = 0;
+  for (int li = 0; li < 3; ++li) {
+    const PyramidLevel& L = pyr.levels()[size_t(li)];
+    const std::vector<float>& old = before[size_t(li)];
+    const int n = L.res + 1;
+    for (int z = 0; z < n; ++z)
+      for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x)
+          for (int k = 0; k < kLevelChannels; ++k) {
+            const size_t i = L.vertex_index(x, y, z) * kLevelChannels + size_t(k);
+            // Touched: the finest level's vertices of the cells with samples.
+            const bool touched = li == 2 && x <= 4 && y <= 4 && z <= 4;
+            double expect = old[i];
+            if (touched) {
+              const int c[3] = {x, y, z};
+              for (int a = 0; a < 3; ++a)
+                for (int d = -1; d <= 1; d += 2) {
+                  int q[3] = {c[0], c[1], c[2]};
+                  q[a] += d;
+                  if (q[a] < 0 || q[a] >= n) continue;
+                  expect -= rate * (old[i] - old[L.vertex_index(q[0], q[1], q[2]) * kLevelChannels + size_t(k)]);
+                }
+            }
+            EXPECT_NEAR(L.value[i], expect, 1e-6) << li << " " << x << "," << y << "," << z;
+            moved += L.value[i] != old[i];
+          }
+  }
+  EXPECT_GT(moved, 100u);
+}
+
 TEST(FeatureGrid, PyramidGradientMatchesFiniteDifferences) {
   const int R = 32;
   FeaturePyramid pyr(R, {8, 16, 32}, 11, 0.5f);
@@ -320,6 +364,32 @@ TEST(FeatureGrid, BlockTotalVariationIsTheGradientOfItsEnergy) {
     const double fd = weight * (ep - em) / 0.5;  // exact: the energy is quadratic
     EXPECT_NEAR(blk.adam().grad[i] - before[i], fd, 1e-4 * (1 + std::fabs(fd))) << "value " << i;
   }
+}
+
+TEST(FeatureGrid, BlockSmoothingIsAStepDownTheTotalVariation) {
+  // smooth(rate) moves each touched vertex by -rate * sum(v - u) over the
+  // neighbours add_tv_gradient uses: the step -rate / 2 * dE/dv on the energy
+  // of the test above, from the values before the step.
+  const int R = 32, F = 2;
+  BlockFeatures blk = two_adjacent_blocks(F, 43);
+  const GridSamples s = samples_in_every_voxel({4, 8, 12}, {12, 12, 16}, 44);
+  std::vector<float> r(s.ids.size() * F, 1.f);
+  GradientSlabs slabs;
+  slabs.build(R, kMicroPerFine, s.ids, s.micro);
+  blk.scatter_gradients(slabs, s.pos, s.micro, r);
+  const std::vector<float> before_grad = blk.adam().grad;
+  const std::vector<float> before = blk.values();
+  const float rate = 0.04f;
+  blk.add_tv_gradient(rate / 2);
+  std::vector<float> step(before.size());
+  for (size_t i = 0; i < step.size(); ++i) step[i] = blk.adam().grad[i] - before_grad[i];
+  blk.smooth(rate);
+  size_t moved = 0;
+  for (size_t i = 0; i < before.size(); ++i) {
+    EXPECT_NEAR(blk.values()[i], before[i] - step[i], 1e-6) << "value " << i;
+    moved += blk.values()[i] != before[i];
+  }
+  EXPECT_GT(moved, before.size() / 2);
 }
 
 TEST(FeatureGrid, BlockInterpolationUsesTheMicroVoxelCorners) {

@@ -218,6 +218,8 @@ TEST(Train, RegularisersActAndKeepTheResultIndependentOfThreads) {
   reg.tv_weight = 1e-5f;
   reg.tv_levels = 2;
   reg.block_tv_weight = 1e-5f;
+  reg.smooth_weight = 0.5f;
+  reg.block_smooth_weight = 0.5f;
   reg.distortion_weight = 0.01f;
   reg.mlp_tie_weight = 1e-3f;
   reg.mlp_equalize = 0.f;  // the tie and the equalization exclude each other
@@ -232,10 +234,11 @@ TEST(Train, RegularisersActAndKeepTheResultIndependentOfThreads) {
   EXPECT_NE(model_bytes(a, true), model_bytes(plain, true));
   // The terms that act after the freeze only (the others have gradient tests
   // in kernels_test.cpp) each change the result alone.
-  for (int term = 0; term < 2; ++term) {
+  for (int term = 0; term < 3; ++term) {
     TrainConfig c = short_config();
     if (term == 0) c.block_tv_weight = 1e-5f;
     if (term == 1) c.mlp_tie_weight = 1e-3f, c.mlp_equalize = 0.f;
+    if (term == 2) c.block_smooth_weight = 0.5f;
     Trainer t(data, c);
     ASSERT_TRUE(t.run(two));
     EXPECT_NE(model_bytes(t, false), model_bytes(plain, false)) << "term " << term;
@@ -423,6 +426,12 @@ TEST(Train, RejectsBadInputWithClearErrors) {
             std::string::npos);
   EXPECT_NE(message([] { parse_train_config("mlp_tie_weight: -1\n", "p.yaml"); }).find("mlp_tie_weight"),
             std::string::npos);
+  // Smoothing steps that would overshoot the neighbours' mean (lr_features 0.02: at most 1 / 0.12).
+  EXPECT_NE(message([] { parse_train_config("smooth_weight: 9\n", "p.yaml"); }).find("smooth_weight"),
+            std::string::npos);
+  EXPECT_NE(message([] { parse_train_config("block_smooth_weight: -1\n", "p.yaml"); }).find("block_smooth_weight"),
+            std::string::npos);
+  EXPECT_EQ(parse_train_config("smooth_weight: 8\n", "p.yaml").smooth_weight, 8.f);
 }
 
 TEST(Train, PresetsAreValid) {
