@@ -35,6 +35,7 @@ struct BenchOptions {
   std::string model, dataset, split = "test", views = "0,8,16", engine = "fast", vs;
   int frames = 5, warmup = 1, width = 800, threads = 0;
   float step = 1.f;
+  float fast_transmittance = RenderSettings().fast_transmittance_min;
   std::string form = "auto";
   CLI::Option* dataset_opt = nullptr;
   CLI::Option* views_opt = nullptr;
@@ -113,6 +114,7 @@ void run_bench_render(const BenchOptions& o) {
   const Engine& engine = find_engine(o.engine);
   RenderSettings s;
   s.step_micro = o.step;
+  s.fast_transmittance_min = o.fast_transmittance;
   s.form = parse_model_form(o.form, "--form");
   s.threads = o.threads;
   check_step_micro(o.step, 0, "--step");
@@ -233,6 +235,11 @@ void register_bench_cmd(CLI::App& app) {
   cmd->add_option("--vs", o->vs, "also time this engine once per view and print the ratio (reference)");
   cmd->add_option("--width", o->width, "orbit image size (without --dataset)")->capture_default_str();
   cmd->add_option("--step", o->step, "sample spacing in micro voxels")->capture_default_str();
+  cmd->add_option("--fast-transmittance", o->fast_transmittance,
+                  "fast engines: end rays below this transmittance (each pixel within it of the reference's; 0: the "
+                  "reference's samples exactly)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   cmd->add_option("--form", o->form, "auto, float or quantized")->capture_default_str();
   cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();
   cmd->callback([o] { run_bench_render(*o); });

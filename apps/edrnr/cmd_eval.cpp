@@ -33,6 +33,7 @@ struct EvalOptions {
   std::string views, json_path, save_dir;
   int limit = 0, downscale = 1;
   float step = 1.f;
+  float fast_transmittance = RenderSettings().fast_transmittance_min;
   std::string form = "auto", background = "white", engine = "reference";
   int threads = 0;
   CLI::Option *views_opt, *limit_opt;
@@ -83,6 +84,7 @@ void run_eval(const EvalOptions& o) {
   const bool vs_reference = std::string(engine.name) != "reference";
   RenderSettings s;
   s.step_micro = o.step;
+  s.fast_transmittance_min = o.fast_transmittance;
   s.form = parse_model_form(o.form, "--form");
   parse_background(o.background, "--background", s.background);
   s.threads = o.threads;
@@ -162,6 +164,7 @@ void run_eval(const EvalOptions& o) {
     j["split"] = o.split;
     j["downscale"] = o.downscale;
     j["step_micro"] = o.step;
+    j["fast_transmittance_min"] = o.fast_transmittance;
     j["form"] = o.form;
     j["engine"] = engine.name;
     j["background"] = {s.background[0], s.background[1], s.background[2]};
@@ -185,6 +188,11 @@ void register_eval_cmd(CLI::App& app) {
   cmd->add_option("--json", o->json_path, "write the results as JSON to this file");
   cmd->add_option("--save-dir", o->save_dir, "write each rendered view as <split>_<view>.png here");
   cmd->add_option("--step", o->step, "sample spacing in micro voxels")->capture_default_str();
+  cmd->add_option("--fast-transmittance", o->fast_transmittance,
+                  "fast engines: end rays below this transmittance (each pixel within it of the reference's; 0: the "
+                  "reference's samples exactly)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   cmd->add_option("--form", o->form, "auto, float or quantized")->capture_default_str();
   cmd->add_option("--background", o->background, "white, black or R,G,B (also composites the images)")
       ->capture_default_str();

@@ -33,6 +33,7 @@ struct RenderOptions {
   double orbit = 0, elevation = 30, radius = 4, fov = 40;
   int width = 0, height = 0;
   float step = 1.f;
+  float fast_transmittance = RenderSettings().fast_transmittance_min;
   std::string form = "auto", background = "white", engine = "reference";
   int threads = 0;
   int turntable = 0;
@@ -154,6 +155,7 @@ void run_render(const RenderOptions& o) {
   const Engine& engine = find_engine(o.engine);
   RenderSettings s;
   s.step_micro = o.step;
+  s.fast_transmittance_min = o.fast_transmittance;
   s.form = parse_model_form(o.form, "--form");
   parse_background(o.background, "--background", s.background);
   limits::check_threads(o.threads);
@@ -201,6 +203,11 @@ void register_render_cmd(CLI::App& app) {
   o->width_opt = cmd->add_option("--width", o->width, "image width (default 800, or the camera's)");
   o->height_opt = cmd->add_option("--height", o->height, "image height (default: keeps the aspect ratio)");
   cmd->add_option("--step", o->step, "sample spacing in micro voxels")->capture_default_str();
+  cmd->add_option("--fast-transmittance", o->fast_transmittance,
+                  "fast engines: end rays below this transmittance (each pixel within it of the reference's; 0: the "
+                  "reference's samples exactly)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   cmd->add_option("--form", o->form, "auto, float or quantized")->capture_default_str();
   cmd->add_option("--background", o->background, "white, black or R,G,B")->capture_default_str();
   cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();

@@ -129,6 +129,7 @@ class TileRenderer {
                Image& image, bool profile)
       : fm_(fm), m_(*fm.model), skip_(skip), camera_(camera), s_(s), image_(image), profile_(profile) {
     delta_ = sample_spacing(m_, s.step_micro);
+    transmittance_min_ = std::max(s.transmittance_min, s.fast_transmittance_min);
     aabb_ = {m_.object_aabb.lo.cast<double>(), m_.object_aabb.hi.cast<double>()};
   }
 
@@ -219,7 +220,7 @@ class TileRenderer {
         const int r = w.active[a];
         if (w.exhausted[r]) w.open[r] = false;
         float T = w.T[r];
-        for (uint32_t i = w.begin[r]; i < w.end[r] && T >= s_.transmittance_min; ++i) {
+        for (uint32_t i = w.begin[r]; i < w.end[r] && T >= transmittance_min_; ++i) {
           const FastSampleOut& o = w.outs[i];
           const float weight = T * o.alpha;
           for (int c = 0; c < 3; ++c) w.rgb[r][c] += weight * o.rgb[c];
@@ -227,7 +228,7 @@ class TileRenderer {
           ++composited;
         }
         w.T[r] = T;
-        if (T < s_.transmittance_min) w.open[r] = false;
+        if (T < transmittance_min_) w.open[r] = false;
         if (w.open[r]) w.active[still_open++] = r;
       }
       n_active = still_open;
@@ -303,6 +304,7 @@ class TileRenderer {
   Image& image_;
   bool profile_;
   float delta_ = 0;
+  float transmittance_min_ = 0;  // the rays' end (RenderSettings::fast_transmittance_min)
   Box3d aabb_;
 };
 

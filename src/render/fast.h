@@ -1,8 +1,8 @@
 #pragma once
 // The fast CPU renderer: the chip's data-reuse ideas applied to CPU caches
 // and SIMD (docs/performance.md). Same model, same sampling rule and the same
-// samples as the reference renderer (render/reference.h, render/traversal.h);
-// only the order of the work changes:
+// samples as the reference renderer (render/reference.h, render/traversal.h)
+// up to the end of each ray; the order of the work changes:
 //   - the image is cut into 16x16-pixel tiles visited in Z (Morton) order and
 //     shared among threads (OpenMP, dynamic); a tile's 256 rays are a packet;
 //   - a tile whose rays all miss the region around the object (a test of the
@@ -18,6 +18,9 @@
 //     fine-voxel blocks in place;
 //   - each ray composites its samples in order, stops at the transmittance
 //     threshold, and asks for more samples only if it is still open.
+// Rays end at the transmittance RenderSettings::fast_transmittance_min (1e-3
+// by default, the reference's 1e-4 with 0): every pixel within that of the
+// reference's per channel, for about 11 % fewer samples.
 // Every pixel is computed by one thread in a fixed order, so the image does
 // not depend on the thread count.
 //

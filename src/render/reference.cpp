@@ -80,6 +80,8 @@ void check_render_inputs(const Camera& camera, const RenderSettings& s) {
   if (!(s.step_micro > 0.f && std::isfinite(s.step_micro))) fail("render step {} must be positive", s.step_micro);
   if (!(s.transmittance_min >= 0.f && s.transmittance_min <= 1.f))
     fail("transmittance threshold {} is outside [0, 1]", s.transmittance_min);
+  if (!(s.fast_transmittance_min >= 0.f && s.fast_transmittance_min <= 1.f))
+    fail("fast renderer's transmittance threshold {} is outside [0, 1]", s.fast_transmittance_min);
   if (s.threads < 0) fail("thread count {} is negative", s.threads);
 }
 

@@ -34,6 +34,13 @@ struct RenderSettings {
   ModelForm form = ModelForm::Auto;
   bool use_occupancy_tiers = true;  // false: test every candidate (a slow check of the skipping)
   int threads = 0;                  // 0: all cores
+  // The fast engines (render/fast.h) end a ray once its transmittance is
+  // below max(transmittance_min, fast_transmittance_min): every pixel then
+  // differs from the reference's by less than this per channel (the
+  // weights the reference still gives sum to less than the transmittance
+  // left, and each weighs a colour difference of at most 1). 0: the
+  // reference's samples exactly.
+  float fast_transmittance_min = 1e-3f;
 };
 
 struct RenderStats {

@@ -32,6 +32,7 @@ TEST(Fast, FloatPathMatchesTheReference) {
     ASSERT_EQ(fast.arithmetic(), FastArithmetic::Float);
     RenderSettings s;
     s.form = form;
+    s.fast_transmittance_min = 0.f;  // the reference's samples exactly
     for (const Camera& cam : views(61, 47)) {
       RenderStats rs, fs;
       const Image ref = render_reference(m, cam, s, &rs);
@@ -321,6 +322,7 @@ TEST(Fast, TilesAwayFromTheObjectMatchTheReference) {
   const FastRenderer fast(m, ModelForm::Auto, FastPath::Float);
   RenderSettings s;
   s.background[0] = 0.3f;
+  s.fast_transmittance_min = 0.f;
   for (const Camera& cam : {orbit_camera(150, 130, 20, 25, 14, 40), orbit_camera(97, 160, 250, -35, 11, 50)}) {
     RenderStats rs, fs;
     const Image ref = render_reference(m, cam, s, &rs);
@@ -333,6 +335,42 @@ TEST(Fast, TilesAwayFromTheObjectMatchTheReference) {
     EXPECT_LT(fs.rays_hit_aabb * 4, fs.rays);  // the object covers a small part of the image
     EXPECT_EQ(img.at(0, 0)[0], s.background[0]);
   }
+}
+
+// By default rays end at a transmittance of 1e-3 instead of the reference's
+// 1e-4: fewer samples, and every pixel within 1e-3 of the reference's (the
+// weights left sum to less than that, each on a colour difference of at most
+// 1), whatever the background; a reference threshold above it is kept.
+TEST(Fast, EarlierEndStaysWithinItsBound) {
+  const SceneModel m = several_model(128);
+  const FastRenderer fast(m, ModelForm::Float, FastPath::Float);
+  for (float bg : {1.f, 0.f}) {
+    RenderSettings s;
+    s.form = ModelForm::Float;
+    for (float& c : s.background) c = bg;
+    ASSERT_EQ(s.fast_transmittance_min, 1e-3f);
+    for (const Camera& cam : views(61, 47)) {
+      RenderStats rs, fs;
+      const Image ref = render_reference(m, cam, s, &rs);
+      const Image img = fast.render(cam, s, &fs);
+      float worst = 0.f;
+      for (size_t i = 0; i < img.data.size(); ++i) worst = std::max(worst, std::fabs(img.data[i] - ref.data[i]));
+      EXPECT_LE(worst, 1e-3f + 1e-5f);  // the bound, plus the float arithmetic's order
+      EXPECT_GT(worst, 1e-5f);          // the end moved
+      EXPECT_LT(fs.samples, rs.samples);
+      EXPECT_GT(fs.samples, rs.samples * 8 / 10);
+    }
+  }
+  RenderSettings high;
+  high.form = ModelForm::Float;
+  high.transmittance_min = 0.05f;
+  const Camera cam = views(40, 40)[0];
+  RenderStats rs, fs;
+  render_reference(m, cam, high, &rs);
+  fast.render(cam, high, &fs);
+  EXPECT_EQ(fs.samples, rs.samples);
+  high.fast_transmittance_min = 2.f;
+  EXPECT_THROW(fast.render(cam, high), Error);
 }
 
 TEST(Fast, ImageDoesNotDependOnTheThreadCount) {
@@ -379,6 +417,7 @@ TEST(Fast, QuantizedFeaturesOfAnyWidthMatchTheReference) {
     const FastRenderer fast(m, ModelForm::Quantized, FastPath::Float);
     RenderSettings s;
     s.form = ModelForm::Quantized;
+    s.fast_transmittance_min = 0.f;
     for (const Camera& cam : views(37, 29)) {
       RenderStats rs, fs;
       const Image ref = render_reference(m, cam, s, &rs);
