@@ -103,9 +103,13 @@ struct TileWork {
   bool hit_aabb[kTileRays];   // meets the object AABB
   int active[kTileRays];      // the open rays
   uint32_t begin[kTileRays], end[kTileRays];
-  std::vector<FastSample> samples;  // the round's samples: [0, n_samples) (the vector only grows)
+  // The round's samples: ray r's at [begin[r], end[r]), each marched group's
+  // rays' slots of `limit` records one after the other (with gaps after rays
+  // that ended early) in [0, n_samples) (the vector only grows).
+  std::vector<FastSample> samples;
   size_t n_samples = 0;
-  std::vector<FastSample> group_records;  // fast_march_records' output
+  int gathered[kTileRays];  // the round's rays in the order they were marched
+  int n_gathered = 0;
   std::vector<FastSampleOut> outs;
   std::vector<uint32_t> order, count, first, used;
 };
@@ -173,6 +177,7 @@ class TileRenderer {
       // Traversal: each open ray's next samples, contiguous per ray.
       if (n_active == 0) break;
       w.n_samples = 0;
+      w.n_gathered = 0;
       if (w.count.size() != m_.mlp_count()) {
         w.count.assign(m_.mlp_count(), 0);
         w.first.assign(m_.mlp_count(), 0);
@@ -195,7 +200,7 @@ class TileRenderer {
       for (int c = 0; c < 2; ++c)
         if (g[c] > 0) gather(w, group[c], g[c], limit[c], tot);
       if (profile_) traversal += since(t);
-      if (w.n_samples > 0) {
+      if (!w.used.empty()) {
         if (!encoded && fm_.dir_dims > 0) {
           w.dir.resize(size_t(fm_.dir_dims) * kTileRays);
           fast_encode_directions(fm_, w.dx, w.dy, w.dz, kTileRays, w.dir.data(), kTileRays);
@@ -208,9 +213,9 @@ class TileRenderer {
         for (uint32_t u : w.used) {
           fast_eval_batch(fm_, u, w.samples.data(), w.order.data() + w.first[u], w.count[u], w.dir.data(), kTileRays,
                           delta_, w.outs.data(), profile_ ? &kernel : nullptr);
+          tot.profile.mlp_samples += w.count[u];
           w.count[u] = 0;
         }
-        tot.profile.mlp_samples += w.n_samples;
         if (profile_) t = Clock::now();
       }
       // Compositing, each ray in sample order; the rays that stay open.
@@ -220,13 +225,15 @@ class TileRenderer {
         const int r = w.active[a];
         if (w.exhausted[r]) w.open[r] = false;
         float T = w.T[r];
+        float rgb[3] = {w.rgb[r][0], w.rgb[r][1], w.rgb[r][2]};  // in registers: the stores cannot alias outs
         for (uint32_t i = w.begin[r]; i < w.end[r] && T >= transmittance_min_; ++i) {
           const FastSampleOut& o = w.outs[i];
           const float weight = T * o.alpha;
-          for (int c = 0; c < 3; ++c) w.rgb[r][c] += weight * o.rgb[c];
+          for (int c = 0; c < 3; ++c) rgb[c] += weight * o.rgb[c];
           T *= o.trans;
           ++composited;
         }
+        for (int c = 0; c < 3; ++c) w.rgb[r][c] = rgb[c];
         w.T[r] = T;
         if (T < transmittance_min_) w.open[r] = false;
         if (w.open[r]) w.active[still_open++] = r;
@@ -259,22 +266,22 @@ class TileRenderer {
       marchers[i] = &w.marchers[size_t(group[i])];
       rays[i] = uint32_t(group[i]);
     }
-    w.group_records.resize(size_t(kFastMarchGroup) * size_t(limit));
     int counts[kFastMarchGroup];
     bool ended[kFastMarchGroup];
-    fast_march_records(marchers, rays, g, limit, w.group_records.data(), counts, ended, &tot.missing);
+    const size_t base = w.n_samples;  // the records go straight to the round's samples, `limit` slots per ray
+    fast_march_records(marchers, rays, g, limit, w.samples.data() + base, counts, ended, &tot.missing);
     for (int i = 0; i < g; ++i) {
       const int r = group[i];
       if (ended[i]) w.exhausted[r] = true;
-      w.begin[r] = uint32_t(w.n_samples);
-      const FastSample* rec = w.group_records.data() + size_t(i) * size_t(limit);
-      for (int j = 0; j < counts[i]; ++j) {
-        const uint32_t mlp = rec[j].mlp;
+      w.begin[r] = uint32_t(base + size_t(i) * size_t(limit));
+      w.end[r] = w.begin[r] + uint32_t(counts[i]);
+      w.gathered[w.n_gathered++] = r;
+      for (uint32_t j = w.begin[r]; j < w.end[r]; ++j) {
+        const uint32_t mlp = w.samples[j].mlp;
         if (w.count[mlp]++ == 0) w.used.push_back(mlp);
-        w.samples[w.n_samples++] = rec[j];
       }
-      w.end[r] = uint32_t(w.n_samples);
     }
+    w.n_samples = base + size_t(g) * size_t(limit);
   }
 
   // Counting sort of the round's samples by MLP, whose counts gather() made
@@ -282,17 +289,19 @@ class TileRenderer {
   // at [first[u], first[u] + count[u]).
   void group_by_mlp(TileWork& w) const {
     const FastSample* samples = w.samples.data();
-    const uint32_t n = uint32_t(w.n_samples);
     uint32_t at = 0;
     for (uint32_t u : w.used) {
       w.first[u] = at;
       at += w.count[u];
       w.count[u] = 0;
     }
-    if (w.order.size() < n) w.order.resize(n);
-    for (uint32_t i = 0; i < n; ++i) {
-      const uint32_t u = samples[i].mlp;
-      w.order[w.first[u] + w.count[u]++] = i;
+    if (w.order.size() < at) w.order.resize(at);
+    for (int a = 0; a < w.n_gathered; ++a) {  // the samples in the order they were marched
+      const int r = w.gathered[a];
+      for (uint32_t i = w.begin[r]; i < w.end[r]; ++i) {
+        const uint32_t u = samples[i].mlp;
+        w.order[w.first[u] + w.count[u]++] = i;
+      }
     }
   }
 
