@@ -132,6 +132,8 @@ class TileRenderer {
   TileRenderer(const FastModel& fm, const FastSkipGrid& skip, const Camera& camera, const RenderSettings& s,
                Image& image, bool profile)
       : fm_(fm), m_(*fm.model), skip_(skip), camera_(camera), s_(s), image_(image), profile_(profile) {
+    tiles_x_ = (camera.width + kTile - 1) / kTile;
+    start_ = tile_start_distances(m_, skip_, camera_, kTile, tiles_x_, (camera.height + kTile - 1) / kTile);
     delta_ = sample_spacing(m_, s.step_micro);
     transmittance_min_ = std::max(s.transmittance_min, s.fast_transmittance_min);
     aabb_ = {m_.object_aabb.lo.cast<double>(), m_.object_aabb.hi.cast<double>()};
@@ -153,8 +155,9 @@ class TileRenderer {
     // The rays' marchers and directions, set up in SIMD lanes. A ray that
     // meets the AABB has candidates in the region around it.
     w.marchers.resize(kTileRays);
-    fast_setup_rays(m_, skip_, camera_, delta_, aabb_, tile.x0, tile.y0, tw, n, w.marchers.data(), w.dx, w.dy, w.dz,
-                    w.hit_aabb);
+    const double t_start = start_[size_t(tile.y0 / kTile) * size_t(tiles_x_) + size_t(tile.x0 / kTile)];
+    fast_setup_rays(m_, skip_, camera_, delta_, aabb_, tile.x0, tile.y0, tw, n, t_start, w.marchers.data(), w.dx, w.dy,
+                    w.dz, w.hit_aabb);
     int n_active = 0;  // w.active[0, n_active): the open rays, in increasing order
     for (int r = 0; r < kTileRays; ++r) {
       if (r >= n) {  // padding lanes of the direction encoding
@@ -314,6 +317,8 @@ class TileRenderer {
   bool profile_;
   float delta_ = 0;
   float transmittance_min_ = 0;  // the rays' end (RenderSettings::fast_transmittance_min)
+  int tiles_x_ = 0;
+  std::vector<double> start_;  // per tile, row by row: where its rays may start (tile_start_distances)
   Box3d aabb_;
 };
 

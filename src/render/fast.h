@@ -7,6 +7,10 @@
 //     shared among threads (OpenMP, dynamic); a tile's 256 rays are a packet;
 //   - a tile whose rays all miss the region around the object (a test of the
 //     tile's view cone against the box) is filled with the background;
+//   - per frame, the occupied fine voxels are projected onto the tiles: each
+//     tile's rays start marching at the nearest distance of a voxel that
+//     covers it (tile_start_distances, render/fast_march.h), and not at all
+//     where none does;
 //   - each ray of the packet marches inside the object AABB (FastMarcher,
 //     render/fast_march.h: a distance field over the fine tier for empty
 //     space, then SIMD vectors of consecutive candidates tested against the

@@ -3,6 +3,8 @@
 // picked at run time (HWY_DYNAMIC_DISPATCH).
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <vector>
 
 #include "render/fast_march.h"
 #include "render/fast_march_grid.h"
@@ -63,7 +65,8 @@ HWY_INLINE auto WidenMask(DD dd, DI32 di32, M m) {
 }
 
 void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& cam, float delta, const Box3d& aabb,
-               int x0, int y0, int tw, int n, FastMarcher* marchers, float* dx, float* dy, float* dz, bool* hit_aabb) {
+               int x0, int y0, int tw, int n, double t_start, FastMarcher* marchers, float* dx, float* dy, float* dz,
+               bool* hit_aabb) {
   using DD = hn::ScalableTag<double>;
   using VD = hn::Vec<DD>;
   const DD dd;
@@ -102,6 +105,7 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
   const VD one = hn::Set(dd, 1.0), zero = hn::Zero(dd);
   const VD c2w_z[3] = {hn::Set(dd, cam.c2w[2] * -1.0), hn::Set(dd, cam.c2w[6] * -1.0), hn::Set(dd, cam.c2w[10] * -1.0)};
   const VD half = hn::Set(dd, 0.5), vdelta = hn::Set(dd, ddelta);
+  const VD t_start_v = hn::Set(dd, std::max(0.0, std::min(t_start, 1e300)));
   double om[3];  // the micro origin as doubles
   for (int a = 0; a < 3; ++a) om[a] = double(m0.origin[a]);
   alignas(64) double u[kMax], v[kMax], dir[3][kMax], exit[3][kMax], scale[3][kMax], offset[3][kMax], kk[3][kMax];
@@ -158,6 +162,10 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
     special = hn::Or(special, hn::AndNot(hn::Lt(last, hn::Set(dd, 0x1p51)), valid));
     const VD k = StdMax(zero, hn::Sub(hn::Floor(first), one));
     const VD k_end = hn::Add(hn::Ceil(last), one);
+    // The tile's start: the candidate before the one at or past t_start (the
+    // candidates before it end a step or more before t_start).
+    const VD k_start =
+        StdMax(k, hn::Sub(hn::Floor(StdMin(hn::Sub(hn::Div(t_start_v, vdelta), half), hn::Set(dd, 4e18))), one));
     const VD t_max = hn::Mul(hn::Add(k_end, hn::Set(dd, 1.5)), vdelta);
     VD max_coord = hn::Set(dd, R);
     for (int a = 0; a < 3; ++a)
@@ -180,11 +188,11 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
     // step, until a candidate with a shorter reach or the end. That
     // candidate's vector test is left to the march, marked dense so that it
     // does not look the reach up again.
-    VD kv = k, checks = zero;
+    VD kv = k_start, checks = zero;
     auto dense = hn::FirstN(dd, 0);
-    // Whether the march has candidates, before the steps (the AABB count's condition).
+    // Whether the march has candidates, before the start and the steps (the AABB count's condition).
     const auto has_candidates = hn::And(valid, hn::Le(k, k_end));
-    auto active = hn::AndNot(special, has_candidates);
+    auto active = hn::AndNot(special, hn::And(valid, hn::Le(kv, k_end)));
     while (!hn::AllFalse(dd, active)) {
       const VF kf = hn::DemoteTo(dfh, kv);  // kv is an integer below 2^51: float(int64) rounds the same
       const VF t = hn::Mul(hn::Add(kf, hn::Set(dfh, 0.5f)), hn::Set(dfh, delta));
@@ -277,9 +285,76 @@ namespace edrnr {
 HWY_EXPORT(SetupRays);
 
 void fast_setup_rays(const SceneModel& model, const FastSkipGrid& skip, const Camera& camera, float delta,
-                     const Box3d& aabb, int x0, int y0, int tw, int n, FastMarcher* marchers, float* dx, float* dy,
-                     float* dz, bool* hit_aabb) {
-  HWY_DYNAMIC_DISPATCH(SetupRays)(model, skip, camera, delta, aabb, x0, y0, tw, n, marchers, dx, dy, dz, hit_aabb);
+                     const Box3d& aabb, int x0, int y0, int tw, int n, double t_start, FastMarcher* marchers, float* dx,
+                     float* dy, float* dz, bool* hit_aabb) {
+  HWY_DYNAMIC_DISPATCH(SetupRays)
+  (model, skip, camera, delta, aabb, x0, y0, tw, n, t_start, marchers, dx, dy, dz, hit_aabb);
+}
+
+std::vector<double> tile_start_distances(const SceneModel& model, const FastSkipGrid& skip, const Camera& cam, int tile,
+                                         int tiles_x, int tiles_y) {
+  const double inf = std::numeric_limits<double>::infinity();
+  std::vector<double> start(size_t(tiles_x) * size_t(tiles_y), inf);
+  const Vec3d o = cam.origin();
+  const Vec3d lo = model.scene_box.lo.cast<double>();
+  const Vec3d micro = model.micro_voxel_size().cast<double>();
+  const int R = skip.res;
+  for (int fz = 0; fz < R; ++fz)
+    for (int fy = 0; fy < R; ++fy)
+      for (int fx = 0; fx < R; ++fx) {
+        if (skip.at(fx, fy, fz) != 0) continue;  // empty fine voxel
+        // The fine voxel widened by one micro voxel, relative to the camera.
+        const Vec3d b_lo =
+            lo + micro * (Vec3d{double(fx), double(fy), double(fz)} * double(kMicroPerFine) - Vec3d{1, 1, 1}) - o;
+        const Vec3d b_hi = b_lo + micro * double(kMicroPerFine + 2);
+        double d2 = 0;  // squared distance from the camera to the box
+        for (int a = 0; a < 3; ++a) {
+          const double c = std::max({b_lo[a], -b_hi[a], 0.0});
+          d2 += c * c;
+        }
+        const double dist = std::sqrt(d2);
+        // The corners in camera space, projected (u = cx + fx X / -Z, v = cy - fy Y / -Z).
+        double u_lo = inf, u_hi = -inf, v_lo = inf, v_hi = -inf;
+        bool in_front = true;
+        for (int c = 0; c < 8 && in_front; ++c) {
+          const Vec3d w{(c & 1) ? b_hi.x : b_lo.x, (c & 2) ? b_hi.y : b_lo.y, (c & 4) ? b_hi.z : b_lo.z};
+          double p[3];
+          for (int j = 0; j < 3; ++j) p[j] = cam.c2w[j] * w.x + cam.c2w[4 + j] * w.y + cam.c2w[8 + j] * w.z;
+          const double depth = -p[2];
+          if (!(depth > 1e-9 * (std::abs(w.x) + std::abs(w.y) + std::abs(w.z) + 1e-300))) {
+            in_front = false;
+            break;
+          }
+          const double u = cam.cx + cam.fx * p[0] / depth, v = cam.cy - cam.fy * p[1] / depth;
+          u_lo = std::min(u_lo, u);
+          u_hi = std::max(u_hi, u);
+          v_lo = std::min(v_lo, v);
+          v_hi = std::max(v_hi, v);
+        }
+        int tx0 = 0, tx1 = tiles_x - 1, ty0 = 0, ty1 = tiles_y - 1;
+        if (in_front) {
+          // Pixels whose centre (i + 0.5) lies within a pixel of the projection.
+          const auto first = [&](double x) { return int(std::clamp(std::ceil(x - 1.5), -1.0, 1e9)); };
+          const auto last = [&](double x) { return int(std::clamp(std::floor(x + 0.5), -1.0, 1e9)); };
+          const int i0 = first(std::min(u_lo, u_hi)), i1 = last(std::max(u_lo, u_hi));
+          const int j0 = first(std::min(v_lo, v_hi)), j1 = last(std::max(v_lo, v_hi));
+          if (!(std::isfinite(u_lo) && std::isfinite(u_hi) && std::isfinite(v_lo) && std::isfinite(v_hi))) {
+            // (not expected in front of the camera; every tile then)
+          } else {
+            if (i1 < 0 || j1 < 0) continue;
+            tx0 = std::max(0, i0) / tile;
+            tx1 = std::min(tiles_x - 1, i1 / tile);
+            ty0 = std::max(0, j0) / tile;
+            ty1 = std::min(tiles_y - 1, j1 / tile);
+          }
+        }
+        for (int ty = ty0; ty <= ty1; ++ty)
+          for (int tx = tx0; tx <= tx1; ++tx) {
+            double& s = start[size_t(ty) * size_t(tiles_x) + size_t(tx)];
+            s = std::min(s, dist);
+          }
+      }
+  return start;
 }
 
 }  // namespace edrnr

@@ -95,6 +95,64 @@ void approach(FastMarcher::State& st, const SceneModel& m, const FastSkipGrid& s
   }
 }
 
+// tile_start_distances: no pixel ray of a tile has a sample before the
+// tile's distance (none at all at +inf), checked against the reference march
+// ray by ray; and marchers set up from it yield the reference's samples.
+// Cameras around the object, inside it and far from it.
+TEST(Fast, TileStartsComeBeforeEverySample) {
+  const SceneModel m = several_model(64, false);
+  const FastSkipGrid skip(m);
+  const Box3d aabb{m.object_aabb.lo.cast<double>(), m.object_aabb.hi.cast<double>()};
+  std::vector<Camera> cams = views(40, 36);
+  cams.push_back(orbit_camera(17, 17, 40, 10, 0.3, 120));
+  cams.push_back(orbit_camera(30, 30, 120, 25, 40, 8));
+  const int tile = 8;
+  const float delta = sample_spacing(m, 1.f);
+  int unreached = 0, started = 0;
+  size_t samples = 0;
+  for (size_t c = 0; c < cams.size(); ++c) {
+    const Camera& cam = cams[c];
+    const int tx = (cam.width + tile - 1) / tile, ty = (cam.height + tile - 1) / tile;
+    const std::vector<double> start = tile_start_distances(m, skip, cam, tile, tx, ty);
+    ASSERT_EQ(start.size(), size_t(tx) * size_t(ty));
+    for (int j = 0; j < ty; ++j)
+      for (int i = 0; i < tx; ++i) {
+        const double t0 = start[size_t(j) * size_t(tx) + size_t(i)];
+        unreached += std::isinf(t0);
+        const int x0 = i * tile, y0 = j * tile, tw = std::min(tile, cam.width - x0);
+        const int n = tw * std::min(tile, cam.height - y0);
+        std::vector<FastMarcher> lanes(static_cast<size_t>(n));
+        std::vector<float> dx(static_cast<size_t>(n)), dy(dx), dz(dx);
+        bool hit[tile * tile];
+        fast_setup_rays(m, skip, cam, delta, aabb, x0, y0, tw, n, t0, lanes.data(), dx.data(), dy.data(), dz.data(),
+                        hit);
+        for (int r = 0; r < n; ++r) {
+          SCOPED_TRACE(testing::Message() << "camera " << c << " pixel " << x0 + r % tw << "," << y0 + r / tw);
+          const Ray ray = cam.pixel_ray(x0 + r % tw, y0 + r / tw);
+          const MicroRay mr = make_micro_ray(m, ray, delta);
+          SampleMarcher ref(m, ray, mr, true);
+          MarchSample a, b;
+          bool first = true;
+          for (;;) {
+            const bool more = ref.next(a);
+            ASSERT_EQ(lanes[size_t(r)].next(b), more);
+            if (!more) break;
+            ASSERT_EQ(a.k, b.k);
+            if (first) {
+              ASSERT_GE((double(a.k) + 0.5) * double(delta), t0);
+              started += t0 > 0;
+              first = false;
+            }
+            ++samples;
+          }
+        }
+      }
+  }
+  EXPECT_GT(unreached, 10);  // tiles the object does not cover
+  EXPECT_GT(started, 100);   // rays with samples in tiles with a start
+  EXPECT_GT(samples, 1000u);
+}
+
 // The tile set-up in SIMD lanes leaves every marcher as the scalar set-up
 // and the march's first steps do, bit for bit, and gives the same
 // directions and AABB hits; marched on, each yields the samples and
@@ -129,7 +187,8 @@ TEST(Fast, RaySetupInLanesEqualsTheScalarSetUp) {
           std::vector<FastMarcher> lanes(static_cast<size_t>(n));
           std::vector<float> dx(static_cast<size_t>(n)), dy(dx), dz(dx);
           bool hit[77];
-          fast_setup_rays(m, skip, cam, delta, aabb, x0, y0, tw, n, lanes.data(), dx.data(), dy.data(), dz.data(), hit);
+          fast_setup_rays(m, skip, cam, delta, aabb, x0, y0, tw, n, 0.0, lanes.data(), dx.data(), dy.data(), dz.data(),
+                          hit);
           for (int r = 0; r < n; ++r) {
             SCOPED_TRACE(testing::Message()
                          << "camera " << c << " step " << step << " pixel " << x0 + r % tw << "," << y0 + r / tw);
