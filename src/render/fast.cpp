@@ -20,8 +20,11 @@ using Clock = std::chrono::steady_clock;
 
 constexpr int kTile = 16;                 // tile edge, pixels
 constexpr int kTileRays = kTile * kTile;  // rays per packet (a multiple of every SIMD width)
-constexpr int kFirstRoundSamples = 4;     // samples a ray hands over in the first round
-constexpr int kMaxRoundSamples = 8;       // ... doubling each round up to this
+// The rays' start distances (tile_start_distances) are kept per square of
+// this many pixels: a fine voxel of lego spans about 6 pixels at 800x800.
+constexpr int kStartCell = 4;
+constexpr int kFirstRoundSamples = 4;  // samples a ray hands over in the first round
+constexpr int kMaxRoundSamples = 8;    // ... doubling each round up to this
 // A ray whose transmittance is already below kDimTransmittance is likely to
 // end within a sample or two: it hands over at most kDimRoundSamples per
 // round, so fewer samples past its end run through an MLP.
@@ -96,7 +99,8 @@ bool tile_misses_box(const Camera& cam, const Tile& t, const Box3d& box) {
 struct TileWork {
   std::vector<FastMarcher> marchers;
   alignas(64) float dx[kTileRays], dy[kTileRays], dz[kTileRays];
-  std::vector<float> dir;  // dir_dims rows of kTileRays
+  double t_start[kTileRays];  // where each ray may start marching (tile_start_distances)
+  std::vector<float> dir;     // dir_dims rows of kTileRays
   float T[kTileRays], rgb[kTileRays][3];
   bool open[kTileRays];       // may still have samples and T above the threshold
   bool exhausted[kTileRays];  // its march has ended
@@ -132,8 +136,9 @@ class TileRenderer {
   TileRenderer(const FastModel& fm, const FastSkipGrid& skip, const Camera& camera, const RenderSettings& s,
                Image& image, bool profile)
       : fm_(fm), m_(*fm.model), skip_(skip), camera_(camera), s_(s), image_(image), profile_(profile) {
-    tiles_x_ = (camera.width + kTile - 1) / kTile;
-    start_ = tile_start_distances(m_, skip_, camera_, kTile, tiles_x_, (camera.height + kTile - 1) / kTile);
+    cells_x_ = (camera.width + kStartCell - 1) / kStartCell;
+    start_ =
+        tile_start_distances(m_, skip_, camera_, kStartCell, cells_x_, (camera.height + kStartCell - 1) / kStartCell);
     delta_ = sample_spacing(m_, s.step_micro);
     transmittance_min_ = std::max(s.transmittance_min, s.fast_transmittance_min);
     aabb_ = {m_.object_aabb.lo.cast<double>(), m_.object_aabb.hi.cast<double>()};
@@ -155,9 +160,11 @@ class TileRenderer {
     // The rays' marchers and directions, set up in SIMD lanes. A ray that
     // meets the AABB has candidates in the region around it.
     w.marchers.resize(kTileRays);
-    const double t_start = start_[size_t(tile.y0 / kTile) * size_t(tiles_x_) + size_t(tile.x0 / kTile)];
-    fast_setup_rays(m_, skip_, camera_, delta_, aabb_, tile.x0, tile.y0, tw, n, t_start, w.marchers.data(), w.dx, w.dy,
-                    w.dz, w.hit_aabb);
+    for (int r = 0; r < n; ++r)  // each ray's start: its cell's
+      w.t_start[r] =
+          start_[size_t((tile.y0 + r / tw) / kStartCell) * size_t(cells_x_) + size_t((tile.x0 + r % tw) / kStartCell)];
+    fast_setup_rays(m_, skip_, camera_, delta_, aabb_, tile.x0, tile.y0, tw, n, w.t_start, w.marchers.data(), w.dx,
+                    w.dy, w.dz, w.hit_aabb);
     int n_active = 0;  // w.active[0, n_active): the open rays, in increasing order
     for (int r = 0; r < kTileRays; ++r) {
       if (r >= n) {  // padding lanes of the direction encoding
@@ -317,8 +324,8 @@ class TileRenderer {
   bool profile_;
   float delta_ = 0;
   float transmittance_min_ = 0;  // the rays' end (RenderSettings::fast_transmittance_min)
-  int tiles_x_ = 0;
-  std::vector<double> start_;  // per tile, row by row: where its rays may start (tile_start_distances)
+  int cells_x_ = 0;
+  std::vector<double> start_;  // per cell of kStartCell pixels, row by row: where its rays may start
   Box3d aabb_;
 };
 

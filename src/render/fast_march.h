@@ -195,17 +195,17 @@ void fast_march_records(FastMarcher* const* marchers, const uint32_t* rays, int 
 // direction as floats (dx, dy, dz)[r], and hit_aabb[r]: whether the march has
 // candidates and the ray meets `aabb` (intersect_box) with t_far >= 0.
 //
-// t_start (scene units along the unit rays, >= 0) is where the tile's rays
-// may start looking (tile_start_distances): the lanes' marches begin at the
-// candidate before it if that is later than their own first one (the rays
-// set up by set_up ignore it). The candidates skipped lie before t_start by
-// at least one step, where, for the distances tile_start_distances gives, no
-// sample can be, so the samples are the same for any t_start it gives; the
-// jumps and lookups (occupancy_checks) are fewer. hit_aabb does not depend on
-// it. 0: no start (the marchers as set_up leaves them, advanced as above).
+// t_start[r] (scene units along the unit ray, >= 0; null: 0 for all) is
+// where ray r may start looking (tile_start_distances): the lanes' marches
+// begin at the candidate before it if that is later than their own first one
+// (the rays set up by set_up ignore it). The candidates skipped lie before
+// t_start by at least one step, where, for the distances
+// tile_start_distances gives, no sample can be, so the samples are the same;
+// the jumps and lookups (occupancy_checks) are fewer. hit_aabb does not
+// depend on it.
 void fast_setup_rays(const SceneModel& model, const FastSkipGrid& skip, const Camera& camera, float delta,
-                     const Box3d& aabb, int x0, int y0, int tw, int n, double t_start, FastMarcher* marchers, float* dx,
-                     float* dy, float* dz, bool* hit_aabb);
+                     const Box3d& aabb, int x0, int y0, int tw, int n, const double* t_start, FastMarcher* marchers,
+                     float* dx, float* dy, float* dz, bool* hit_aabb);
 
 // For the image cut into tiles of `tile` pixels (tiles_x by tiles_y, row
 // by row), a distance from the camera along the unit pixel rays of each tile

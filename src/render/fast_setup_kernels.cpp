@@ -65,8 +65,8 @@ HWY_INLINE auto WidenMask(DD dd, DI32 di32, M m) {
 }
 
 void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& cam, float delta, const Box3d& aabb,
-               int x0, int y0, int tw, int n, double t_start, FastMarcher* marchers, float* dx, float* dy, float* dz,
-               bool* hit_aabb) {
+               int x0, int y0, int tw, int n, const double* t_start, FastMarcher* marchers, float* dx, float* dy,
+               float* dz, bool* hit_aabb) {
   using DD = hn::ScalableTag<double>;
   using VD = hn::Vec<DD>;
   const DD dd;
@@ -105,10 +105,10 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
   const VD one = hn::Set(dd, 1.0), zero = hn::Zero(dd);
   const VD c2w_z[3] = {hn::Set(dd, cam.c2w[2] * -1.0), hn::Set(dd, cam.c2w[6] * -1.0), hn::Set(dd, cam.c2w[10] * -1.0)};
   const VD half = hn::Set(dd, 0.5), vdelta = hn::Set(dd, ddelta);
-  const VD t_start_v = hn::Set(dd, std::max(0.0, std::min(t_start, 1e300)));
   double om[3];  // the micro origin as doubles
   for (int a = 0; a < 3; ++a) om[a] = double(m0.origin[a]);
-  alignas(64) double u[kMax], v[kMax], dir[3][kMax], exit[3][kMax], scale[3][kMax], offset[3][kMax], kk[3][kMax];
+  alignas(64) double u[kMax], v[kMax], ts[kMax], dir[3][kMax], exit[3][kMax], scale[3][kMax], offset[3][kMax],
+      kk[3][kMax];
   alignas(64) double aabb_far[kMax], flags[5][kMax];
   alignas(64) float dm[3][kMax];
   for (int r0 = 0; r0 < n; r0 += int(L)) {
@@ -116,6 +116,7 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
       const int r = std::min(r0 + int(l), n - 1);
       u[l] = double(x0 + r % tw) + 0.5;
       v[l] = double(y0 + r / tw) + 0.5;
+      ts[l] = t_start ? std::max(0.0, std::min(t_start[r], 1e300)) : 0.0;
     }
     // Camera::ray_at: the camera-space direction, rotated, normalized.
     const VD cx = hn::Div(hn::Sub(hn::Load(dd, u), hn::Set(dd, cam.cx)), hn::Set(dd, cam.fx));
@@ -162,10 +163,10 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
     special = hn::Or(special, hn::AndNot(hn::Lt(last, hn::Set(dd, 0x1p51)), valid));
     const VD k = StdMax(zero, hn::Sub(hn::Floor(first), one));
     const VD k_end = hn::Add(hn::Ceil(last), one);
-    // The tile's start: the candidate before the one at or past t_start (the
+    // The ray's start: the candidate before the one at or past t_start (the
     // candidates before it end a step or more before t_start).
     const VD k_start =
-        StdMax(k, hn::Sub(hn::Floor(StdMin(hn::Sub(hn::Div(t_start_v, vdelta), half), hn::Set(dd, 4e18))), one));
+        StdMax(k, hn::Sub(hn::Floor(StdMin(hn::Sub(hn::Div(hn::Load(dd, ts), vdelta), half), hn::Set(dd, 4e18))), one));
     const VD t_max = hn::Mul(hn::Add(k_end, hn::Set(dd, 1.5)), vdelta);
     VD max_coord = hn::Set(dd, R);
     for (int a = 0; a < 3; ++a)
@@ -285,8 +286,8 @@ namespace edrnr {
 HWY_EXPORT(SetupRays);
 
 void fast_setup_rays(const SceneModel& model, const FastSkipGrid& skip, const Camera& camera, float delta,
-                     const Box3d& aabb, int x0, int y0, int tw, int n, double t_start, FastMarcher* marchers, float* dx,
-                     float* dy, float* dz, bool* hit_aabb) {
+                     const Box3d& aabb, int x0, int y0, int tw, int n, const double* t_start, FastMarcher* marchers,
+                     float* dx, float* dy, float* dz, bool* hit_aabb) {
   HWY_DYNAMIC_DISPATCH(SetupRays)
   (model, skip, camera, delta, aabb, x0, y0, tw, n, t_start, marchers, dx, dy, dz, hit_aabb);
 }

@@ -123,9 +123,10 @@ TEST(Fast, TileStartsComeBeforeEverySample) {
         const int n = tw * std::min(tile, cam.height - y0);
         std::vector<FastMarcher> lanes(static_cast<size_t>(n));
         std::vector<float> dx(static_cast<size_t>(n)), dy(dx), dz(dx);
+        std::vector<double> starts(static_cast<size_t>(n), t0);
         bool hit[tile * tile];
-        fast_setup_rays(m, skip, cam, delta, aabb, x0, y0, tw, n, t0, lanes.data(), dx.data(), dy.data(), dz.data(),
-                        hit);
+        fast_setup_rays(m, skip, cam, delta, aabb, x0, y0, tw, n, starts.data(), lanes.data(), dx.data(), dy.data(),
+                        dz.data(), hit);
         for (int r = 0; r < n; ++r) {
           SCOPED_TRACE(testing::Message() << "camera " << c << " pixel " << x0 + r % tw << "," << y0 + r / tw);
           const Ray ray = cam.pixel_ray(x0 + r % tw, y0 + r / tw);
@@ -187,8 +188,8 @@ TEST(Fast, RaySetupInLanesEqualsTheScalarSetUp) {
           std::vector<FastMarcher> lanes(static_cast<size_t>(n));
           std::vector<float> dx(static_cast<size_t>(n)), dy(dx), dz(dx);
           bool hit[77];
-          fast_setup_rays(m, skip, cam, delta, aabb, x0, y0, tw, n, 0.0, lanes.data(), dx.data(), dy.data(), dz.data(),
-                          hit);
+          fast_setup_rays(m, skip, cam, delta, aabb, x0, y0, tw, n, nullptr, lanes.data(), dx.data(), dy.data(),
+                          dz.data(), hit);
           for (int r = 0; r < n; ++r) {
             SCOPED_TRACE(testing::Message()
                          << "camera " << c << " step " << step << " pixel " << x0 + r % tw << "," << y0 + r / tw);
