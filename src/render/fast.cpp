@@ -160,9 +160,10 @@ class TileRenderer {
     // The rays' marchers and directions, set up in SIMD lanes. A ray that
     // meets the AABB has candidates in the region around it.
     w.marchers.resize(kTileRays);
-    for (int r = 0; r < n; ++r)  // each ray's start: its cell's
-      w.t_start[r] =
-          start_[size_t((tile.y0 + r / tw) / kStartCell) * size_t(cells_x_) + size_t((tile.x0 + r % tw) / kStartCell)];
+    for (int r = 0, y = tile.y0; y < tile.y1; ++y) {  // each ray's start: its cell's
+      const double* row = start_.data() + size_t(y / kStartCell) * size_t(cells_x_);
+      for (int x = tile.x0; x < tile.x1; ++x) w.t_start[r++] = row[x / kStartCell];
+    }
     fast_setup_rays(m_, skip_, camera_, delta_, aabb_, tile.x0, tile.y0, tw, n, w.t_start, w.marchers.data(), w.dx,
                     w.dy, w.dz, w.hit_aabb);
     int n_active = 0;  // w.active[0, n_active): the open rays, in increasing order
