@@ -181,15 +181,25 @@ template <class Neighbours>
 void smooth_touched(std::vector<float>& value, const std::vector<std::vector<int32_t>>& lists, int channels, float rate,
                     Neighbours neighbours) {
   const int n_lists = int(lists.size());
-  std::vector<std::vector<float>> delta(static_cast<size_t>(n_lists));
+  // One buffer for all lists' deltas, kept from call to call (no allocation
+  // per step): list j's at [offset[j], offset[j + 1]).
+  static thread_local std::vector<float> delta;
+  static thread_local std::vector<size_t> offset;
+  offset.assign(size_t(n_lists) + 1, 0);
+  for (int j = 0; j < n_lists; ++j)
+    offset[size_t(j) + 1] = offset[size_t(j)] + lists[size_t(j)].size() * size_t(channels);
+  if (delta.size() < offset.back()) delta.resize(offset.back());
+  // The caller's buffers (thread_local: the OpenMP threads must not name them).
+  float* const all = delta.data();
+  const size_t* const at = offset.data();
 #pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < n_lists; ++j) {
     const std::vector<int32_t>& list = lists[size_t(j)];
-    std::vector<float>& d = delta[size_t(j)];
-    d.assign(list.size() * size_t(channels), 0.f);
+    float* d = all + at[j];
     for (size_t i = 0; i < list.size(); ++i) {
       const float* v = &value[size_t(list[i]) * size_t(channels)];
-      float* di = &d[i * size_t(channels)];
+      float* di = d + i * size_t(channels);
+      for (int k = 0; k < channels; ++k) di[k] = 0.f;
       neighbours(list[i], [&](const float* u) {
         for (int k = 0; k < channels; ++k) di[k] += rate * (v[k] - u[k]);
       });
@@ -198,7 +208,7 @@ void smooth_touched(std::vector<float>& value, const std::vector<std::vector<int
 #pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < n_lists; ++j) {
     const std::vector<int32_t>& list = lists[size_t(j)];
-    const std::vector<float>& d = delta[size_t(j)];
+    const float* d = all + at[j];
     for (size_t i = 0; i < list.size(); ++i) {
       float* v = &value[size_t(list[i]) * size_t(channels)];
       for (int k = 0; k < channels; ++k) v[k] -= d[i * size_t(channels) + size_t(k)];
