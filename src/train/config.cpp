@@ -110,6 +110,7 @@ void TrainConfig::validate() const {
   if (!(lr_features > 0.f) || !(lr_mlp > 0.f)) fail("train config: learning rates must be positive");
   if (!(lr_final > 0.f && lr_final <= 1.f)) fail("train config: lr_final must be in (0, 1]");
   if (!(qat_lr_scale > 0.f && qat_lr_scale <= 100.f)) fail("train config: qat_lr_scale must be in (0, 100]");
+  if (!(block_lr_scale > 0.f && block_lr_scale <= 100.f)) fail("train config: block_lr_scale must be in (0, 100]");
   if (lr_warmup < 0) fail("train config: lr_warmup must not be negative");
   if (!(adam_beta1 >= 0.f && adam_beta1 < 1.f && adam_beta2 >= 0.f && adam_beta2 < 1.f && adam_eps > 0.f))
     fail("train config: Adam needs 0 <= beta < 1 and eps > 0");
@@ -125,14 +126,17 @@ void TrainConfig::validate() const {
   if (!(block_tv_weight >= 0.f)) fail("train config: block_tv_weight must not be negative");
   // The largest rate a step applies (per neighbour) times the most neighbours
   // (6 in a grid, 9 for a block vertex with its copies) stays below 1, so a
-  // step never overshoots the neighbours' mean.
-  const float max_rate = lr_features * std::max(1.f, qat_lr_scale);
-  if (!(smooth_weight >= 0.f && smooth_weight * max_rate * 6.f < 1.f))
-    fail("train config: smooth_weight {} must be >= 0 and below 1 / (6 lr_features max(1, qat_lr_scale)) = {}",
-         smooth_weight, 1.f / (6.f * max_rate));
-  if (!(block_smooth_weight >= 0.f && block_smooth_weight * max_rate * 9.f < 1.f))
-    fail("train config: block_smooth_weight {} must be >= 0 and below 1 / (9 lr_features max(1, qat_lr_scale)) = {}",
-         block_smooth_weight, 1.f / (9.f * max_rate));
+  // step never overshoots the neighbours' mean. The pyramid is smoothed in
+  // the main phase (learning rate at most lr_features), the blocks later.
+  const float block_rate = lr_features * block_lr_scale * std::max(1.f, qat_lr_scale);
+  if (!(smooth_weight >= 0.f && smooth_weight * lr_features * 6.f < 1.f))
+    fail("train config: smooth_weight {} must be >= 0 and below 1 / (6 lr_features) = {}", smooth_weight,
+         1.f / (6.f * lr_features));
+  if (!(block_smooth_weight >= 0.f && block_smooth_weight * block_rate * 9.f < 1.f))
+    fail(
+        "train config: block_smooth_weight {} must be >= 0 and below 1 / (9 lr_features block_lr_scale max(1, "
+        "qat_lr_scale)) = {}",
+        block_smooth_weight, 1.f / (9.f * block_rate));
   if (!(distortion_weight >= 0.f)) fail("train config: distortion_weight must not be negative");
   if (!(mlp_tie_weight >= 0.f)) fail("train config: mlp_tie_weight must not be negative");
   if (!(init_features >= 0.f)) fail("train config: init_features must not be negative");
@@ -230,6 +234,7 @@ const std::map<std::string, Field>& fields() {
       {"lr_mlp", scalar(&TrainConfig::lr_mlp)},
       {"lr_final", scalar(&TrainConfig::lr_final)},
       {"qat_lr_scale", scalar(&TrainConfig::qat_lr_scale)},
+      {"block_lr_scale", scalar(&TrainConfig::block_lr_scale)},
       {"lr_warmup", scalar(&TrainConfig::lr_warmup)},
       {"adam_beta1", scalar(&TrainConfig::adam_beta1)},
       {"adam_beta2", scalar(&TrainConfig::adam_beta2)},

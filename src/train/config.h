@@ -44,6 +44,7 @@ struct TrainConfig {
   float lr_mlp = 2e-2f;
   float lr_final = 0.2f;       // the learning rate decays exponentially to this factor at the last step
   float qat_lr_scale = 0.33f;  // the learning rate is multiplied by this in the quantization-aware phase
+  float block_lr_scale = 1.f;  // the feature blocks' learning rate (per-CV and quantization-aware phases) times this
   int64_t lr_warmup = 100;     // linear warm-up steps
   float adam_beta1 = 0.9f, adam_beta2 = 0.99f, adam_eps = 1e-15f;
   // Per pyramid level (coarsest first), the step from which it is read and

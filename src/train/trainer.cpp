@@ -158,10 +158,10 @@ void Trainer::State::do_step() {
     slabs.build(cfg.micro_res, kMicroPerFine, active_ids, b.micro);
     blocks.scatter_gradients(slabs, b.pos, b.micro, b.d_feat);
     blocks.add_tv_gradient(cfg.block_tv_weight);
-    blocks.smooth(cfg.block_smooth_weight * cfg.lr_features * lr);
+    blocks.smooth(cfg.block_smooth_weight * cfg.lr_features * cfg.block_lr_scale * lr);
     lap(kScatter);
     ++feature_adam_t;
-    blocks.adam_step(AdamStep(adam_settings(), cfg.lr_features * lr, feature_adam_t));
+    blocks.adam_step(AdamStep(adam_settings(), cfg.lr_features * cfg.block_lr_scale * lr, feature_adam_t));
   }
   ++mlp_adam_t;
   const AdamStep mstep(adam_settings(), cfg.lr_mlp * lr, mlp_adam_t);

@@ -348,6 +348,26 @@ TEST(Train, QatLearningRateScaleActsInTheQuantizationPhaseOnly) {
   EXPECT_NE(model_bytes(a, true), model_bytes(b, true));
 }
 
+TEST(Train, BlockLearningRateScaleActsOnTheBlocksOnly) {
+  // block_lr_scale multiplies the feature blocks' learning rate: the main
+  // phase (the pyramid) runs the same (the same running loss at its last
+  // step), the blocks trained afterwards differ.
+  const Dataset data = load("train");
+  TrainConfig scaled = short_config();
+  scaled.block_lr_scale = 3.f;
+  TrainOptions stop;
+  stop.stop_after = 55;  // the main phase (the per-CV phase starts at 60 of 100 steps)
+  Trainer a(data, short_config()), b(data, scaled);
+  ASSERT_FALSE(a.run(stop));
+  ASSERT_FALSE(b.run(stop));
+  ASSERT_EQ(a.stats().phase, Phase::Main);
+  EXPECT_EQ(a.stats().loss, b.stats().loss);
+  ASSERT_TRUE(a.run({}));
+  ASSERT_TRUE(b.run({}));
+  EXPECT_NE(a.stats().loss, b.stats().loss);
+  EXPECT_NE(a.export_model(false).features_f32, b.export_model(false).features_f32);
+}
+
 TEST(Train, CoarseVoxelPruningDropsWholeCoarseVoxelsAndTheirMlps) {
   // prune_cv_weight empties every coarse voxel whose samples never weighed
   // that much (here 2 of the scene's 8 coarse voxels reach 0.2), with their
@@ -432,6 +452,8 @@ TEST(Train, RejectsBadInputWithClearErrors) {
   EXPECT_NE(message([] { parse_train_config("block_smooth_weight: -1\n", "p.yaml"); }).find("block_smooth_weight"),
             std::string::npos);
   EXPECT_EQ(parse_train_config("smooth_weight: 8\n", "p.yaml").smooth_weight, 8.f);
+  EXPECT_NE(message([] { parse_train_config("block_lr_scale: 0\n", "p.yaml"); }).find("block_lr_scale"),
+            std::string::npos);
 }
 
 TEST(Train, PresetsAreValid) {
