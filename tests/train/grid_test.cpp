@@ -320,15 +320,21 @@ TEST(FeatureGrid, BlockGradientMatchesFiniteDifferences) {
   }
 }
 
-TEST(FeatureGrid, BlockTotalVariationIsTheGradientOfItsEnergy) {
-  const int R = 32, F = 2;
-  BlockFeatures blk = two_adjacent_blocks(F, 41);
-  // One sample in every micro voxel of both blocks touches every vertex.
-  const GridSamples s = samples_in_every_voxel({4, 8, 12}, {12, 12, 16}, 42);
-  std::vector<float> r(s.ids.size() * F, 1.f);
+// two_adjacent_blocks (in a 32^3 micro grid) with a gradient scattered from
+// one sample in every micro voxel of both blocks: every vertex is touched.
+BlockFeatures touched_adjacent_blocks(int F, uint64_t seed) {
+  BlockFeatures blk = two_adjacent_blocks(F, seed);
+  const GridSamples s = samples_in_every_voxel({4, 8, 12}, {12, 12, 16}, seed + 1);
+  std::vector<float> r(s.ids.size() * size_t(F), 1.f);
   GradientSlabs slabs;
-  slabs.build(R, kMicroPerFine, s.ids, s.micro);
+  slabs.build(32, kMicroPerFine, s.ids, s.micro);
   blk.scatter_gradients(slabs, s.pos, s.micro, r);
+  return blk;
+}
+
+TEST(FeatureGrid, BlockTotalVariationIsTheGradientOfItsEnergy) {
+  const int F = 2;
+  BlockFeatures blk = touched_adjacent_blocks(F, 41);
   const std::vector<float> before = blk.adam().grad;
   const float weight = 0.3f;
   blk.add_tv_gradient(weight);
@@ -370,13 +376,8 @@ TEST(FeatureGrid, BlockSmoothingIsAStepDownTheTotalVariation) {
   // smooth(rate) moves each touched vertex by -rate * sum(v - u) over the
   // neighbours add_tv_gradient uses: the step -rate / 2 * dE/dv on the energy
   // of the test above, from the values before the step.
-  const int R = 32, F = 2;
-  BlockFeatures blk = two_adjacent_blocks(F, 43);
-  const GridSamples s = samples_in_every_voxel({4, 8, 12}, {12, 12, 16}, 44);
-  std::vector<float> r(s.ids.size() * F, 1.f);
-  GradientSlabs slabs;
-  slabs.build(R, kMicroPerFine, s.ids, s.micro);
-  blk.scatter_gradients(slabs, s.pos, s.micro, r);
+  const int F = 2;
+  BlockFeatures blk = touched_adjacent_blocks(F, 43);
   const std::vector<float> before_grad = blk.adam().grad;
   const std::vector<float> before = blk.values();
   const float rate = 0.04f;
