@@ -112,6 +112,8 @@ RenderSettings settings_from(const py::kwargs& kw, const ChipConfig& defaults) {
       s.step_micro = kv.second.cast<float>();
     else if (k == "transmittance_min")
       s.transmittance_min = kv.second.cast<float>();
+    else if (k == "fast_transmittance_min")
+      s.fast_transmittance_min = kv.second.cast<float>();
     else if (k == "background") {
       const auto b = kv.second.cast<std::vector<float>>();
       if (b.size() != 3) fail("background: expected 3 values (R, G, B), got {}", b.size());
@@ -121,7 +123,11 @@ RenderSettings settings_from(const py::kwargs& kw, const ChipConfig& defaults) {
     else if (k == "threads")
       s.threads = kv.second.cast<int>();
     else
-      fail("render: unknown option '{}' (known: step_micro, transmittance_min, background, form, threads)", k);
+      fail(
+          "render: unknown option '{}' (known: step_micro, transmittance_min, fast_transmittance_min, background, "
+          "form, "
+          "threads)",
+          k);
   }
   return s;
 }

@@ -47,6 +47,13 @@ class ModuleTest(unittest.TestCase):
             self.assertGreater(psnr, 30, engine)
         with self.assertRaises(ValueError):
             edrnr.render(self.model, self.camera, engine="nope")
+        # The fast engines end rays at a transmittance of 1e-3 unless told
+        # otherwise: every pixel within 1e-3 of the reference's samples' image.
+        exact = edrnr.render(self.model, self.camera, engine="fast-float", fast_transmittance_min=0)
+        early = edrnr.render(self.model, self.camera, engine="fast-float")
+        self.assertLessEqual(float(np.max(np.abs(exact - early))), 1e-3 + 1e-6)
+        with self.assertRaises(ValueError):
+            edrnr.render(self.model, self.camera, engine="fast", fast_transmittance_min=2)
 
     def test_preset_as_name_dict_and_file_agree(self):
         by_name = edrnr.simulate(self.model, self.camera, preset="edr_nr_40nm")
