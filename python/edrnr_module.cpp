@@ -124,9 +124,8 @@ RenderSettings settings_from(const py::kwargs& kw, const ChipConfig& defaults) {
       s.threads = kv.second.cast<int>();
     else
       fail(
-          "render: unknown option '{}' (known: step_micro, transmittance_min, fast_transmittance_min, background, "
-          "form, "
-          "threads)",
+          "render: unknown option '{}' (known: step_micro, transmittance_min, fast_transmittance_min, "
+          "background, form, threads)",
           k);
   }
   return s;

@@ -235,11 +235,7 @@ void register_bench_cmd(CLI::App& app) {
   cmd->add_option("--vs", o->vs, "also time this engine once per view and print the ratio (reference)");
   cmd->add_option("--width", o->width, "orbit image size (without --dataset)")->capture_default_str();
   cmd->add_option("--step", o->step, "sample spacing in micro voxels")->capture_default_str();
-  cmd->add_option("--fast-transmittance", o->fast_transmittance,
-                  "fast engines: end rays below this transmittance (each pixel within it of the reference's; 0: the "
-                  "reference's samples exactly)")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
+  add_fast_transmittance_option(cmd, &o->fast_transmittance);
   cmd->add_option("--form", o->form, "auto, float or quantized")->capture_default_str();
   cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();
   cmd->callback([o] { run_bench_render(*o); });

@@ -188,11 +188,7 @@ void register_eval_cmd(CLI::App& app) {
   cmd->add_option("--json", o->json_path, "write the results as JSON to this file");
   cmd->add_option("--save-dir", o->save_dir, "write each rendered view as <split>_<view>.png here");
   cmd->add_option("--step", o->step, "sample spacing in micro voxels")->capture_default_str();
-  cmd->add_option("--fast-transmittance", o->fast_transmittance,
-                  "fast engines: end rays below this transmittance (each pixel within it of the reference's; 0: the "
-                  "reference's samples exactly)")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
+  add_fast_transmittance_option(cmd, &o->fast_transmittance);
   cmd->add_option("--form", o->form, "auto, float or quantized")->capture_default_str();
   cmd->add_option("--background", o->background, "white, black or R,G,B (also composites the images)")
       ->capture_default_str();

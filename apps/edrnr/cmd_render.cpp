@@ -203,11 +203,7 @@ void register_render_cmd(CLI::App& app) {
   o->width_opt = cmd->add_option("--width", o->width, "image width (default 800, or the camera's)");
   o->height_opt = cmd->add_option("--height", o->height, "image height (default: keeps the aspect ratio)");
   cmd->add_option("--step", o->step, "sample spacing in micro voxels")->capture_default_str();
-  cmd->add_option("--fast-transmittance", o->fast_transmittance,
-                  "fast engines: end rays below this transmittance (each pixel within it of the reference's; 0: the "
-                  "reference's samples exactly)")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
+  add_fast_transmittance_option(cmd, &o->fast_transmittance);
   cmd->add_option("--form", o->form, "auto, float or quantized")->capture_default_str();
   cmd->add_option("--background", o->background, "white, black or R,G,B")->capture_default_str();
   cmd->add_option("--threads", o->threads, "threads (0: all cores)")->capture_default_str();

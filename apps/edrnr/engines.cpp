@@ -28,4 +28,12 @@ const Engine& find_engine(const std::string& name) {
   fail("--engine '{}': unknown (available: {})", name, names);
 }
 
+void add_fast_transmittance_option(CLI::App* cmd, float* value) {
+  cmd->add_option("--fast-transmittance", *value,
+                  "fast engines: end rays below this transmittance (each pixel within it of the reference's; 0: the "
+                  "reference's samples exactly)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+}
+
 }  // namespace edrnr::cli

@@ -1,6 +1,8 @@
 #pragma once
 // The renderers `edrnr render --engine` and `edrnr eval --engine` can pick.
 // A new engine is one more line in engines.cpp.
+#include <CLI/CLI.hpp>
+
 #include "core/image.h"
 #include "data/camera.h"
 #include "model/scene_model.h"
@@ -17,5 +19,10 @@ struct Engine {
 
 // The engine called `name`; an Error listing the available ones otherwise.
 const Engine& find_engine(const std::string& name);
+
+// Adds --fast-transmittance (RenderSettings::fast_transmittance_min, in
+// [0, 1]) to a command that renders with the engines; *value holds its
+// default.
+void add_fast_transmittance_option(CLI::App* cmd, float* value);
 
 }  // namespace edrnr::cli

@@ -332,22 +332,19 @@ std::vector<double> tile_start_distances(const SceneModel& model, const FastSkip
           v_lo = std::min(v_lo, v);
           v_hi = std::max(v_hi, v);
         }
+        // Every tile, unless the box lies wholly in front of the camera: then
+        // the tiles of the pixels whose centre (i + 0.5) lies within a pixel
+        // of its projection.
         int tx0 = 0, tx1 = tiles_x - 1, ty0 = 0, ty1 = tiles_y - 1;
-        if (in_front) {
-          // Pixels whose centre (i + 0.5) lies within a pixel of the projection.
-          const auto first = [&](double x) { return int(std::clamp(std::ceil(x - 1.5), -1.0, 1e9)); };
-          const auto last = [&](double x) { return int(std::clamp(std::floor(x + 0.5), -1.0, 1e9)); };
-          const int i0 = first(std::min(u_lo, u_hi)), i1 = last(std::max(u_lo, u_hi));
-          const int j0 = first(std::min(v_lo, v_hi)), j1 = last(std::max(v_lo, v_hi));
-          if (!(std::isfinite(u_lo) && std::isfinite(u_hi) && std::isfinite(v_lo) && std::isfinite(v_hi))) {
-            // (not expected in front of the camera; every tile then)
-          } else {
-            if (i1 < 0 || j1 < 0) continue;
-            tx0 = std::max(0, i0) / tile;
-            tx1 = std::min(tiles_x - 1, i1 / tile);
-            ty0 = std::max(0, j0) / tile;
-            ty1 = std::min(tiles_y - 1, j1 / tile);
-          }
+        if (in_front && std::isfinite(u_lo + u_hi + v_lo + v_hi)) {
+          const auto first = [](double x) { return int(std::clamp(std::ceil(x - 1.5), -1.0, 1e9)); };
+          const auto last = [](double x) { return int(std::clamp(std::floor(x + 0.5), -1.0, 1e9)); };
+          const int i0 = first(u_lo), i1 = last(u_hi), j0 = first(v_lo), j1 = last(v_hi);
+          if (i1 < 0 || j1 < 0) continue;
+          tx0 = std::max(0, i0) / tile;
+          tx1 = std::min(tiles_x - 1, i1 / tile);
+          ty0 = std::max(0, j0) / tile;
+          ty1 = std::min(tiles_y - 1, j1 / tile);
         }
         for (int ty = ty0; ty <= ty1; ++ty)
           for (int tx = tx0; tx <= tx1; ++tx) {
