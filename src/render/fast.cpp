@@ -150,9 +150,10 @@ class TileRenderer {
     const int n = tw * (tile.y1 - tile.y0);
     if (tile_misses_box(camera_, tile, skip_.region)) {  // no ray meets the region (which holds the AABB)
       tot.stats.rays += uint64_t(n);
-      for (int r = 0; r < n; ++r) {
-        float* px = image_.at(tile.x0 + r % tw, tile.y0 + r / tw);
-        for (int c = 0; c < 3; ++c) px[c] = s_.background[c];
+      for (int y = tile.y0; y < tile.y1; ++y) {
+        float* px = image_.at(tile.x0, y);
+        for (int x = 0; x < 3 * tw; x += 3)
+          for (int c = 0; c < 3; ++c) px[x + c] = s_.background[c];
       }
       if (profile_) tot.profile.traversal_s += since(t);
       return;
@@ -253,10 +254,11 @@ class TileRenderer {
       tot.stats.samples += composited;
       if (profile_) compositing += since(t);
     }
-    for (int r = 0; r < n; ++r) {
-      tot.stats.occupancy_checks += w.marchers[size_t(r)].occupancy_checks();
-      float* px = image_.at(tile.x0 + r % tw, tile.y0 + r / tw);
-      for (int c = 0; c < 3; ++c) px[c] = w.rgb[r][c] + w.T[r] * s_.background[c];
+    for (int r = 0; r < n; ++r) tot.stats.occupancy_checks += w.marchers[size_t(r)].occupancy_checks();
+    for (int r = 0, y = tile.y0; y < tile.y1; ++y) {  // row by row: no division per pixel
+      float* px = image_.at(tile.x0, y);
+      for (int x = 0; x < tw; ++x, ++r)
+        for (int c = 0; c < 3; ++c) px[3 * x + c] = w.rgb[r][c] + w.T[r] * s_.background[c];
     }
     if (profile_) {
       compositing += since(t);

@@ -106,15 +106,15 @@ class FastMarcher {
     uint64_t checks = 0;
     // The last chunk's samples in order, as the vector test found them: the
     // candidate's lane (k - chunk_k), its point's position in its micro
-    // voxel (p - v per axis: exact, so v + f is p), the micro voxel, the fine
-    // voxel index, the micro voxel's block vertex (lx + 5 (ly + 5 lz)) and
-    // the coarse voxel index; entries [found_next, found_next +
-    // popcount(pending)) are pending.
+    // voxel v (p - v per axis: exact, so v + f is p), the fine voxel index,
+    // the micro voxel's block vertex (lx + 5 (ly + 5 lz)) and the coarse
+    // voxel index; entries [found_next, found_next + popcount(pending)) are
+    // pending. (The renderer's records need no v: the sample path finds it
+    // from the point again.)
     static constexpr int kMaxChunk = 16;
     int found_next = 0;
     alignas(64) int32_t found_lane[kMaxChunk];
     alignas(64) float found_f[3][kMaxChunk];
-    alignas(64) int32_t found_v[3][kMaxChunk];
     alignas(64) int32_t found_fine[kMaxChunk];
     alignas(64) int32_t found_vertex[kMaxChunk];
     alignas(64) int32_t found_coarse[kMaxChunk];

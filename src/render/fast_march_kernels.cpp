@@ -64,9 +64,6 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
         st.found_f[0][n] = p.x - float(v.x);
         st.found_f[1][n] = p.y - float(v.y);
         st.found_f[2][n] = p.z - float(v.z);
-        st.found_v[0][n] = v.x;
-        st.found_v[1][n] = v.y;
-        st.found_v[2][n] = v.z;
         st.found_fine[n] = int32_t(FineIndex(v, g.fine_res));
         st.found_vertex[n] = (v.x & 3) + kBlockVertsPerAxis * ((v.y & 3) + kBlockVertsPerAxis * (v.z & 3));
         st.found_coarse[n] = int32_t(linear_index(v.x / kCvMicro, v.y / kCvMicro, v.z / kCvMicro, g.coarse_res));
@@ -129,9 +126,6 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
     hn::StoreU(hn::Compress(fx, mf), df, st.found_f[0]);
     hn::StoreU(hn::Compress(fy, mf), df, st.found_f[1]);
     hn::StoreU(hn::Compress(fz, mf), df, st.found_f[2]);
-    hn::StoreU(hn::Compress(vx, m), di, st.found_v[0]);
-    hn::StoreU(hn::Compress(vy, m), di, st.found_v[1]);
-    hn::StoreU(hn::Compress(vz, m), di, st.found_v[2]);
     hn::StoreU(hn::Compress(fine, m), di, st.found_fine);
     hn::StoreU(hn::Compress(vertex, m), di, st.found_vertex);
     hn::StoreU(hn::Compress(coarse, m), di, st.found_coarse);
@@ -140,27 +134,21 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
   {
     constexpr int kM = FastMarcher::State::kMaxChunk;
     alignas(64) float lf[3][kM];
-    alignas(64) int32_t lv[6][kM];
+    alignas(64) int32_t lv[3][kM];
     hn::Store(fx, df, lf[0]);
     hn::Store(fy, df, lf[1]);
     hn::Store(fz, df, lf[2]);
-    hn::Store(vx, di, lv[0]);
-    hn::Store(vy, di, lv[1]);
-    hn::Store(vz, di, lv[2]);
-    hn::Store(fine, di, lv[3]);
-    hn::Store(vertex, di, lv[4]);
-    hn::Store(coarse, di, lv[5]);
+    hn::Store(fine, di, lv[0]);
+    hn::Store(vertex, di, lv[1]);
+    hn::Store(coarse, di, lv[2]);
     int n = 0;
     for (uint32_t b = bits; b != 0; b &= b - 1, ++n) {
       const int i = std::countr_zero(b);
       st.found_lane[n] = i;
-      for (int a = 0; a < 3; ++a) {
-        st.found_f[a][n] = lf[a][i];
-        st.found_v[a][n] = lv[a][i];
-      }
-      st.found_fine[n] = lv[3][i];
-      st.found_vertex[n] = lv[4][i];
-      st.found_coarse[n] = lv[5][i];
+      for (int a = 0; a < 3; ++a) st.found_f[a][n] = lf[a][i];
+      st.found_fine[n] = lv[0][i];
+      st.found_vertex[n] = lv[1][i];
+      st.found_coarse[n] = lv[2][i];
     }
   }
 #endif
@@ -203,9 +191,12 @@ HWY_INLINE int Emit(FastMarcher::State& st, const Grid& g, Out& out, int room) {
       r.fy = st.found_f[1][j];
       r.fz = st.found_f[2][j];
     } else {
-      const Vec3i v{st.found_v[0][j], st.found_v[1][j], st.found_v[2][j]};
+      // The micro voxel from the candidate's point again (the same float
+      // operations as the vector test, which found the point in the grid).
       MarchSample& s = out.samples[out.written];
       s.k = st.chunk_k + st.found_lane[j];
+      Vec3i v;
+      VoxelOf(st.ray.point(s.k), g, v);
       // v + (p - v) is p: the difference of a float in [v, v + 1] and v >= 0 is exact.
       s.p_micro = Vec3f{float(v.x) + st.found_f[0][j], float(v.y) + st.found_f[1][j], float(v.z) + st.found_f[2][j]};
       s.voxel = v;

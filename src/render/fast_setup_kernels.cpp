@@ -112,11 +112,18 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
   alignas(64) double aabb_far[kMax], flags[5][kMax];
   alignas(64) float dm[3][kMax];
   for (int r0 = 0; r0 < n; r0 += int(L)) {
+    // Lanes past the last ray repeat it. One division per vector: the
+    // pixel of ray r0, then stepped along the row.
+    int ry = r0 / tw, rx = r0 - ry * tw;
     for (size_t l = 0; l < L; ++l) {
       const int r = std::min(r0 + int(l), n - 1);
-      u[l] = double(x0 + r % tw) + 0.5;
-      v[l] = double(y0 + r / tw) + 0.5;
+      u[l] = double(x0 + rx) + 0.5;
+      v[l] = double(y0 + ry) + 0.5;
       ts[l] = t_start ? std::max(0.0, std::min(t_start[r], 1e300)) : 0.0;
+      if (r + 1 < n && ++rx == tw) {
+        rx = 0;
+        ++ry;
+      }
     }
     // Camera::ray_at: the camera-space direction, rotated, normalized.
     const VD cx = hn::Div(hn::Sub(hn::Load(dd, u), hn::Set(dd, cam.cx)), hn::Set(dd, cam.fx));
