@@ -100,7 +100,7 @@ struct TileWork {
   std::vector<FastMarcher> marchers;
   alignas(64) float dx[kTileRays], dy[kTileRays], dz[kTileRays];
   double t_start[kTileRays];  // where each ray may start marching (tile_start_distances)
-  std::vector<float> dir;     // dir_dims rows of kTileRays
+  std::vector<float> dir;     // fast_direction_rows rows of kTileRays
   float T[kTileRays], rgb[kTileRays][3];
   bool open[kTileRays];       // may still have samples and T above the threshold
   bool exhausted[kTileRays];  // its march has ended
@@ -214,7 +214,7 @@ class TileRenderer {
       if (profile_) traversal += since(t);
       if (!w.used.empty()) {
         if (!encoded && fm_.dir_dims > 0) {
-          w.dir.resize(size_t(fm_.dir_dims) * kTileRays);
+          w.dir.resize(size_t(fast_direction_rows(fm_)) * kTileRays);
           fast_encode_directions(fm_, w.dx, w.dy, w.dz, kTileRays, w.dir.data(), kTileRays);
           encoded = true;
         }

@@ -185,10 +185,36 @@ void DenseBytes(DT d, size_t N, const float* X, const FastLayer& L, const int32_
   }
   for (; o < L.out; ++o) DenseBytesBlock<1>(d, N, xq, words, wq, bq, o, ACC, e);
 }
+// DirectionParts' sums in the byte form: output o of the vector's slots at
+// dir_q[o * kDirRow] = round(m * (bq[o] + W_o . X)) from the packed
+// direction bytes xq (words rows of N lanes) and the weight words wq. The
+// sums are exact integers, as in the float form (Dense<true>), so the
+// results are the same.
+template <class DT>
+void DirectionBytes(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq, int out,
+                    float m, float* dir_q) {
+  const hn::RebindToSigned<DT> di;
+  const hn::Vec<DT> mult = hn::Set(d, m);
+  constexpr int kBlock = 4;
+  for (int o0 = 0; o0 < out; o0 += kBlock) {
+    const int nb = std::min(kBlock, out - o0);
+    hn::Vec<decltype(di)> acc[kBlock];
+    for (int k = 0; k < nb; ++k) acc[k] = hn::Set(di, bq[o0 + k]);
+    for (int j = 0; j < words; ++j) {
+      const auto u = hn::Load(di, xq + size_t(j) * N);
+      for (int k = 0; k < nb; ++k)
+        acc[k] = DotBytes(acc[k], u, hn::Set(di, wq[size_t(o0 + k) * size_t(words) + size_t(j)]));
+    }
+    for (int k = 0; k < nb; ++k)
+      hn::Store(hn::Round(hn::Mul(hn::ConvertTo(d, acc[k]), mult)), d, dir_q + size_t(o0 + k) * kDirRow);
+  }
+}
 #else
 constexpr bool kHaveDotBytes = false;
 template <class DT>
 void DenseBytes(DT, size_t, const float*, const FastLayer&, const int32_t*, float*, const Epilogue&, int32_t*) {}
+template <class DT>
+void DirectionBytes(DT, size_t, const int32_t*, int, const int32_t*, const int32_t*, int, float, float*) {}
 #endif
 
 // Features of the chunk's samples from INT4 codes, 8 channels per 32-bit
@@ -375,14 +401,23 @@ void GatherDirections(DT d, size_t N, const float* dir, size_t ray_stride, const
 // input order, brought to accumulator units with the multiplier dir_in and
 // rounded (as the chip adds them to the other products).
 template <class DT>
-void DirectionParts(DT d, size_t N, const FastModel& fm, const float* p, const float* dir, size_t ray_stride,
-                    const uint32_t* rays, size_t count, Scratch& s) {
+void DirectionParts(DT d, size_t N, const FastModel& fm, const float* p, const int32_t* q, const float* dir,
+                    size_t ray_stride, const uint32_t* rays, size_t count, Scratch& s) {
   const FastLayer& L = fm.color.front();
   const int G = fm.geo_width, D = fm.dir_dims;
   const hn::Vec<DT> m = hn::Set(d, p[fm.dir_in]);
   alignas(64) uint32_t lane_rays[kCap];
   for (size_t j0 = 0; j0 < count; j0 += N) {
     for (size_t l = 0; l < N; ++l) lane_rays[l] = rays[std::min(j0 + l, count - 1)];
+    if (kHaveDotBytes && q) {
+      // The byte form: the rays' packed direction bytes (the rows after the
+      // D values: fast_direction_rows) read as words, 4 inputs per product.
+      const int words = (D + 3) / 4;
+      GatherDirections(d, N, dir + size_t(D) * ray_stride, ray_stride, lane_rays, 0, words,
+                       reinterpret_cast<float*>(s.xq));
+      DirectionBytes(d, N, s.xq, words, q + L.dwq, q + L.dbq, L.out, p[fm.dir_in], s.dir_q + j0);
+      continue;
+    }
     GatherDirections(d, N, dir, ray_stride, lane_rays, G, D, s.cin);
     Dense<true>(d, N, s.cin, L.in, G, L.in, p + L.w, nullptr, L.out, s.split);
     for (int o = 0; o < L.out; ++o)
@@ -497,7 +532,7 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, con
         if (slots == 0 || seg_rays[slots - 1] != ray) seg_rays[slots++] = ray;
         seg_slot[i - i0] = int32_t(slots - 1);
       }
-      DirectionParts(d, N, fm, p, dir, ray_stride, seg_rays, slots, s);
+      DirectionParts(d, N, fm, p, q, dir, ray_stride, seg_rays, slots, s);
     }
     // The next chunk's feature words (mostly in L3: the features are larger
     // than L2) are fetched while this chunk runs: per sample the four runs
@@ -546,6 +581,20 @@ void EncodeDirections(const FastModel& fm, const float* dx, const float* dy, con
       for (int a = 0; a < 3; ++a) put(hn::Sin(d, hn::Mul(f, v[a])));
       for (int a = 0; a < 3; ++a) put(hn::Cos(d, hn::Mul(f, v[a])));
       freq *= 2.f;
+    }
+    if (int8 && !fm.quads.empty()) {
+      // The byte form's rows (fast_direction_rows): codes plus 128 as
+      // unsigned bytes, input 4 j + k in byte k of row D + j.
+      const hn::RebindToSigned<DF> di;
+      const int D = fm.dir_dims;
+      for (int j = 0; 4 * j < D; ++j) {
+        auto u = hn::Zero(di);
+        for (int k = 0; k < 4 && 4 * j + k < D; ++k) {
+          const auto code = hn::ConvertTo(di, hn::LoadU(d, out + size_t(4 * j + k) * ray_stride + r));
+          u = hn::Or(u, hn::ShiftLeftSame(hn::Add(code, hn::Set(di, 128)), 8 * k));
+        }
+        hn::StoreU(u, di, reinterpret_cast<int32_t*>(out + size_t(D + j) * ray_stride + r));
+      }
     }
   }
 }

@@ -44,7 +44,11 @@ void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastSample* sample
 
 // The direction inputs of n rays with unit directions (dx[r], dy[r], dz[r]):
 // encode_direction's values (Float), or those values as INT8 codes of step
-// 1/127 (Int8). Writes value d of ray r to out[d * ray_stride + r].
+// 1/127 (Int8). Writes value d of ray r to out[d * ray_stride + r]; with the
+// byte form (FastModel::quads) also rows D + j, j < ceil(D / 4), of 32-bit
+// words in the floats' place (codes 4 j .. 4 j + 3 plus 128, one per byte),
+// which only the kernels read: out holds fast_direction_rows(fm) rows.
+// n is a multiple of the vector length (16 floats covers every target).
 void fast_encode_directions(const FastModel& fm, const float* dx, const float* dy, const float* dz, size_t n,
                             float* out, size_t ray_stride);
 

@@ -100,6 +100,12 @@ void pack_quads(FastModel& fm, size_t mlps) {
       offset += size_t(L.out) * size_t((L.q_in + 3) / 4);
       L.bq = offset;
       offset += size_t(L.out);
+      if (L.q_in < L.in) {  // the direction part
+        L.dwq = offset;
+        offset += size_t(L.out) * size_t((L.in - L.q_in + 3) / 4);
+        L.dbq = offset;
+        offset += size_t(L.out);
+      }
     }
   const size_t stride = (offset + 15) / 16 * 16;
   std::vector<int32_t> quads(stride * mlps, 0);
@@ -108,19 +114,30 @@ void pack_quads(FastModel& fm, size_t mlps) {
     int32_t* q = quads.data() + i * stride;
     for (const std::vector<FastLayer>* net : {&fm.density, &fm.color})
       for (const FastLayer& L : *net) {
-        const int words = (L.q_in + 3) / 4;
-        for (int o = 0; o < L.out; ++o) {
-          int64_t sum = 0;
-          for (int k = 0; k < L.q_in; ++k) {
+        // Inputs [k0, k1) of output o as words at wq, minus 128 times their
+        // weights' sum returned; false if a weight is not a byte.
+        auto pack = [&](int o, int k0, int k1, size_t wq, int64_t& sum) {
+          const int words = (k1 - k0 + 3) / 4;
+          sum = 0;
+          for (int k = k0; k < k1; ++k) {
             const float w = p[L.w + size_t(o) * size_t(L.in) + size_t(k)];
-            if (!(w >= -128.f && w <= 127.f && w == std::nearbyint(w))) return;
+            if (!(w >= -128.f && w <= 127.f && w == std::nearbyint(w))) return false;
             sum += int64_t(w);
             const uint32_t byte = uint32_t(uint8_t(int8_t(w)));
-            q[L.wq + size_t(o) * size_t(words) + size_t(k / 4)] |= int32_t(byte << (8 * (k % 4)));
+            q[wq + size_t(o) * size_t(words) + size_t((k - k0) / 4)] |= int32_t(byte << (8 * ((k - k0) % 4)));
           }
+          return true;
+        };
+        for (int o = 0; o < L.out; ++o) {
+          int64_t sum = 0;
+          if (!pack(o, 0, L.q_in, L.wq, sum)) return;
           const float b = p[L.b + size_t(o)];
           if (!(std::abs(b) <= float(1 << 23))) return;
           q[L.bq + size_t(o)] = int32_t(b) - int32_t(128 * sum);
+          if (L.q_in < L.in) {
+            if (!pack(o, L.q_in, L.in, L.dwq, sum)) return;
+            q[L.dbq + size_t(o)] = -int32_t(128 * sum);
+          }
         }
       }
   }

@@ -38,6 +38,10 @@ struct FastLayer {
   // output at bq the bias minus 128 times the sum of those weights.
   int q_in = 0;
   size_t wq = 0, bq = 0;
+  // The colour net's first layer only: its direction inputs (from q_in on)
+  // the same way, per output ceil(D / 4) words at dwq and minus 128 times
+  // their weights' sum at dbq (no bias).
+  size_t dwq = 0, dbq = 0;
 };
 
 struct FastModel {
@@ -69,6 +73,13 @@ struct FastModel {
 
 // The widest layer the kernels evaluate (and the widest F and G + D).
 inline constexpr int kFastMaxWidth = 64;
+
+// Rows of the direction buffer fast_encode_directions writes (render/
+// fast_kernels.h): the D direction inputs, and with the byte form (Int8
+// with FastModel::quads) ceil(D / 4) more rows of packed bytes.
+inline int fast_direction_rows(const FastModel& fm) {
+  return fm.dir_dims + (fm.quads.empty() ? 0 : (fm.dir_dims + 3) / 4);
+}
 
 // Packs `model` for the fast renderer. `form` says which stored forms are read
 // (resolve_model_form); Int8 needs the INT4 features and INT8 MLPs. Throws

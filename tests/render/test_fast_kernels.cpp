@@ -82,7 +82,7 @@ TEST(FastKernels, OutputsDoNotDependOnTheChunking) {
   const float delta = 2.f / 64.f;
   for (FastArithmetic a : {FastArithmetic::Int8, FastArithmetic::Float}) {
     const FastModel fm = pack_fast_model(m, resolve_model_form(m, ModelForm::Quantized), a);
-    std::vector<float> dir(size_t(std::max(fm.dir_dims, 1)) * kRays);
+    std::vector<float> dir(size_t(std::max(fast_direction_rows(fm), 1)) * kRays);
     fast_encode_directions(fm, dx.data(), dy.data(), dz.data(), kRays, dir.data(), kRays);
     const size_t n = batch.samples.size();
     std::vector<uint32_t> order(n);
@@ -137,8 +137,22 @@ TEST(FastKernels, Int8ByteFormGivesTheFloatFormsOutputs) {
     const int32_t* q = bytes.mlp_quads(batch.mlp);
     for (int k = 0; k < L.q_in; ++k)
       EXPECT_EQ(float(int8_t(uint32_t(q[L.wq + size_t(k / 4)]) >> (8 * (k % 4)))), p[L.w + size_t(k)]) << k;
+    // The colour net's direction inputs, apart, for every output.
+    const FastLayer& C = bytes.color.front();
+    ASSERT_GT(bytes.dir_dims, 0);
+    ASSERT_EQ(C.in - C.q_in, bytes.dir_dims);
+    const int words = (bytes.dir_dims + 3) / 4;
+    for (int o = 0; o < C.out; ++o) {
+      int64_t sum = 0;
+      for (int k = 0; k < bytes.dir_dims; ++k) {
+        const float w = p[C.w + size_t(o) * size_t(C.in) + size_t(C.q_in + k)];
+        sum += int64_t(w);
+        EXPECT_EQ(float(int8_t(uint32_t(q[C.dwq + size_t(o * words + k / 4)]) >> (8 * (k % 4)))), w) << o << " " << k;
+      }
+      EXPECT_EQ(q[C.dbq + size_t(o)], -128 * sum) << o;
+    }
   }
-  std::vector<float> dir(size_t(std::max(bytes.dir_dims, 1)) * kRays);
+  std::vector<float> dir(size_t(std::max(fast_direction_rows(bytes), 1)) * kRays);
   fast_encode_directions(bytes, dx.data(), dy.data(), dz.data(), kRays, dir.data(), kRays);
   const size_t n = batch.samples.size();
   std::vector<uint32_t> order(n);
