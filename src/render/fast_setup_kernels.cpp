@@ -64,6 +64,22 @@ HWY_INLINE auto WidenMask(DD dd, DI32 di32, M m) {
   return hn::MaskFromVec(hn::BitCast(dd, hn::PromoteTo(di64, hn::VecFromMask(di32, m))));
 }
 
+// A ray the lanes leave alone (a zero or tiny direction component, or
+// candidate indices from 2^51 on): FastMarcher::set_up and the march's
+// first steps, its direction and its AABB count, in scalar code.
+void SetUpAlone(const SceneModel& model, const FastSkipGrid& skip, const Camera& cam, float delta, const Box3d& aabb,
+                int px, int py, const Grid& grid, FastMarcher& fm, float& dx, float& dy, float& dz, bool& hit_aabb) {
+  const Ray ray = cam.pixel_ray(px, py);
+  fm.set_up(model, skip, ray, make_micro_ray(model, ray, delta));
+  const bool had_candidates = !fm.empty();
+  Approach(fm.state(), grid);
+  dx = float(ray.dir.x);
+  dy = float(ray.dir.y);
+  dz = float(ray.dir.z);
+  double t_near, t_far;
+  hit_aabb = had_candidates && intersect_box(ray.origin, ray.dir, aabb, t_near, t_far) && t_far >= 0;
+}
+
 void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& cam, float delta, const Box3d& aabb,
                int x0, int y0, int tw, int n, const double* t_start, FastMarcher* marchers, float* dx, float* dy,
                float* dz, bool* hit_aabb) {
@@ -115,8 +131,13 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
     // Lanes past the last ray repeat it. One division per vector: the
     // pixel of ray r0, then stepped along the row.
     int ry = r0 / tw, rx = r0 - ry * tw;
+    // Whether no ray of the vector can have a sample (every start at +inf:
+    // no occupied fine voxel projects onto their cells): then only the
+    // direction and the AABB count are made, and the marchers left empty.
+    bool none = t_start != nullptr;
     for (size_t l = 0; l < L; ++l) {
       const int r = std::min(r0 + int(l), n - 1);
+      none = none && std::isinf(t_start[r]);
       u[l] = double(x0 + rx) + 0.5;
       v[l] = double(y0 + ry) + 0.5;
       ts[l] = t_start ? std::max(0.0, std::min(t_start[r], 1e300)) : 0.0;
@@ -170,6 +191,32 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
     special = hn::Or(special, hn::AndNot(hn::Lt(last, hn::Set(dd, 0x1p51)), valid));
     const VD k = StdMax(zero, hn::Sub(hn::Floor(first), one));
     const VD k_end = hn::Add(hn::Ceil(last), one);
+    // Whether the march has candidates, before the start and the steps (the AABB count's condition).
+    const auto has_candidates = hn::And(valid, hn::Le(k, k_end));
+    if (none) {
+      hn::Store(af, dd, aabb_far);
+      hn::Store(hn::IfThenElseZero(has_candidates, one), dd, flags[3]);
+      hn::Store(hn::IfThenElseZero(hn::Le(an, af), one), dd, flags[1]);
+      hn::Store(hn::IfThenElseZero(special, one), dd, flags[2]);
+      const int valid_lanes = std::min(int(L), n - r0);
+      for (int l = 0; l < valid_lanes; ++l) {
+        const int r = r0 + l;
+        if (flags[2][l] != 0) {
+          SetUpAlone(model, skip, cam, delta, aabb, x0 + r % tw, y0 + r / tw, grid, marchers[r], dx[r], dy[r], dz[r],
+                     hit_aabb[r]);
+          continue;
+        }
+        MicroRay mr = m0;
+        mr.dir = Vec3f{dm[0][l], dm[1][l], dm[2][l]};
+        const double z[3] = {0, 0, 0};
+        marchers[r].assign(model, skip, mr, 0, -1, z, z, z);
+        dx[r] = float(dir[0][l]);
+        dy[r] = float(dir[1][l]);
+        dz[r] = float(dir[2][l]);
+        hit_aabb[r] = flags[3][l] != 0 && flags[1][l] != 0 && aabb_far[l] >= 0;
+      }
+      continue;
+    }
     // The ray's start: the candidate before the one at or past t_start (the
     // candidates before it end a step or more before t_start).
     const VD k_start =
@@ -198,8 +245,6 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
     // does not look the reach up again.
     VD kv = k_start, checks = zero;
     auto dense = hn::FirstN(dd, 0);
-    // Whether the march has candidates, before the start and the steps (the AABB count's condition).
-    const auto has_candidates = hn::And(valid, hn::Le(k, k_end));
     auto active = hn::AndNot(special, hn::And(valid, hn::Le(kv, k_end)));
     while (!hn::AllFalse(dd, active)) {
       const VF kf = hn::DemoteTo(dfh, kv);  // kv is an integer below 2^51: float(int64) rounds the same
@@ -251,15 +296,7 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
       const int r = r0 + l;
       FastMarcher& fm = marchers[r];
       if (flags[2][l] != 0) {
-        const Ray ray = cam.pixel_ray(x0 + r % tw, y0 + r / tw);
-        fm.set_up(model, skip, ray, make_micro_ray(model, ray, delta));
-        const bool had_candidates = !fm.empty();
-        Approach(fm.state(), grid);
-        dx[r] = float(ray.dir.x);
-        dy[r] = float(ray.dir.y);
-        dz[r] = float(ray.dir.z);
-        double t_near, t_far;
-        hit_aabb[r] = had_candidates && intersect_box(ray.origin, ray.dir, aabb, t_near, t_far) && t_far >= 0;
+        SetUpAlone(model, skip, cam, delta, aabb, x0 + r % tw, y0 + r / tw, grid, fm, dx[r], dy[r], dz[r], hit_aabb[r]);
         continue;
       }
       MicroRay mr = m0;
