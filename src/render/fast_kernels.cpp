@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <limits>
 #include <vector>
 
 #include "model/mlp.h"
@@ -137,11 +138,13 @@ constexpr bool kHaveDotBytes = true;
 
 // DenseBlock in the byte form: ACC rows [o, o + NB) = epilogue(bias + W X)
 // from the inputs in xq (4 per word, plus 128) and the weight words wq,
-// whose bias words bq take the 128 back out. Every sum is an exact integer
-// in both forms, so the results are those of DenseBlock<NB, true>.
+// whose bias words bq take the 128 back out; row r at ACC + r * stride
+// (N when 0). Every sum is an exact integer in both forms, so the results
+// are those of DenseBlock<NB, true>.
 template <int NB, class DT>
 HWY_INLINE void DenseBytesBlock(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq,
-                                int o, float* ACC, const Epilogue& e) {
+                                int o, float* ACC, const Epilogue& e, size_t stride = 0) {
+  if (stride == 0) stride = N;
   const hn::RebindToSigned<DT> di;
   hn::Vec<decltype(di)> acc[NB];
   for (int k = 0; k < NB; ++k) acc[k] = hn::Set(di, bq[o + k]);
@@ -156,7 +159,7 @@ HWY_INLINE void DenseBytesBlock(DT d, size_t N, const int32_t* xq, int words, co
       v = hn::Round(hn::Mul(v, hn::Set(d, e.mult[o + k])));
       v = hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi));
     }
-    hn::Store(v, d, ACC + size_t(o + k) * N);
+    hn::Store(v, d, ACC + size_t(o + k) * stride);
   }
 }
 
@@ -185,29 +188,24 @@ void DenseBytes(DT d, size_t N, const float* X, const FastLayer& L, const int32_
   }
   for (; o < L.out; ++o) DenseBytesBlock<1>(d, N, xq, words, wq, bq, o, ACC, e);
 }
+
 // DirectionParts' sums in the byte form: output o of the vector's slots at
 // dir_q[o * kDirRow] = round(m * (bq[o] + W_o . X)) from the packed
-// direction bytes xq (words rows of N lanes) and the weight words wq. The
-// sums are exact integers, as in the float form (Dense<true>), so the
-// results are the same.
+// direction bytes xq (words rows of N lanes) and the weight words wq (out
+// outputs). The sums are exact integers, as in the float form
+// (Dense<true>), so the results are the same.
 template <class DT>
 void DirectionBytes(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq, int out,
                     float m, float* dir_q) {
-  const hn::RebindToSigned<DT> di;
-  const hn::Vec<DT> mult = hn::Set(d, m);
-  constexpr int kBlock = 4;
-  for (int o0 = 0; o0 < out; o0 += kBlock) {
-    const int nb = std::min(kBlock, out - o0);
-    hn::Vec<decltype(di)> acc[kBlock];
-    for (int k = 0; k < nb; ++k) acc[k] = hn::Set(di, bq[o0 + k]);
-    for (int j = 0; j < words; ++j) {
-      const auto u = hn::Load(di, xq + size_t(j) * N);
-      for (int k = 0; k < nb; ++k)
-        acc[k] = DotBytes(acc[k], u, hn::Set(di, wq[size_t(o0 + k) * size_t(words) + size_t(j)]));
-    }
-    for (int k = 0; k < nb; ++k)
-      hn::Store(hn::Round(hn::Mul(hn::ConvertTo(d, acc[k]), mult)), d, dir_q + size_t(o0 + k) * kDirRow);
-  }
+  float mult[kFastMaxWidth];
+  std::fill(mult, mult + out, m);
+  Epilogue e;  // rounded, not clamped
+  e.mult = mult;
+  e.lo = -std::numeric_limits<float>::infinity();
+  e.hi = std::numeric_limits<float>::infinity();
+  int o = 0;
+  for (; o + 4 <= out; o += 4) DenseBytesBlock<4>(d, N, xq, words, wq, bq, o, dir_q, e, kDirRow);
+  for (; o < out; ++o) DenseBytesBlock<1>(d, N, xq, words, wq, bq, o, dir_q, e, kDirRow);
 }
 #else
 constexpr bool kHaveDotBytes = false;

@@ -123,8 +123,10 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
   const VD half = hn::Set(dd, 0.5), vdelta = hn::Set(dd, ddelta);
   double om[3];  // the micro origin as doubles
   for (int a = 0; a < 3; ++a) om[a] = double(m0.origin[a]);
-  alignas(64) double u[kMax], v[kMax], ts[kMax], dir[3][kMax], exit[3][kMax], scale[3][kMax], offset[3][kMax],
-      kk[3][kMax];
+  alignas(64) double u[kMax], v[kMax], ts[kMax], dir[3][kMax];
+  // The march's terms per lane; zeroed once, as vectors where no lane can
+  // have a sample leave them unwritten (and unread).
+  alignas(64) double exit[3][kMax] = {}, scale[3][kMax] = {}, offset[3][kMax] = {}, kk[3][kMax] = {};
   alignas(64) double aabb_far[kMax], flags[5][kMax];
   alignas(64) float dm[3][kMax];
   for (int r0 = 0; r0 < n; r0 += int(L)) {
@@ -193,101 +195,82 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
     const VD k_end = hn::Add(hn::Ceil(last), one);
     // Whether the march has candidates, before the start and the steps (the AABB count's condition).
     const auto has_candidates = hn::And(valid, hn::Le(k, k_end));
-    if (none) {
-      hn::Store(af, dd, aabb_far);
-      hn::Store(hn::IfThenElseZero(has_candidates, one), dd, flags[3]);
-      hn::Store(hn::IfThenElseZero(hn::Le(an, af), one), dd, flags[1]);
-      hn::Store(hn::IfThenElseZero(special, one), dd, flags[2]);
-      const int valid_lanes = std::min(int(L), n - r0);
-      for (int l = 0; l < valid_lanes; ++l) {
-        const int r = r0 + l;
-        if (flags[2][l] != 0) {
-          SetUpAlone(model, skip, cam, delta, aabb, x0 + r % tw, y0 + r / tw, grid, marchers[r], dx[r], dy[r], dz[r],
-                     hit_aabb[r]);
-          continue;
+    // Where no lane can have a sample, the marchers are left empty (as for
+    // lanes without candidates): none of the march's terms are needed.
+    if (!none) {
+      // The ray's start: the candidate before the one at or past t_start (the
+      // candidates before it end a step or more before t_start).
+      const VD k_start = StdMax(
+          k, hn::Sub(hn::Floor(StdMin(hn::Sub(hn::Div(hn::Load(dd, ts), vdelta), half), hn::Set(dd, 4e18))), one));
+      const VD t_max = hn::Mul(hn::Add(k_end, hn::Set(dd, 1.5)), vdelta);
+      VD max_coord = hn::Set(dd, R);
+      for (int a = 0; a < 3; ++a)
+        max_coord = StdMax(max_coord, hn::Add(hn::Set(dd, std::abs(om[a])), hn::Mul(hn::Abs(dmd[a]), t_max)));
+      const VD margin = hn::Mul(max_coord, hn::Set(dd, 1.0 / 524288.0));
+      VD ex_v[3], sc_v[3], of_v[3];
+      for (int a = 0; a < 3; ++a) {
+        const auto up = hn::Gt(dmd[a], zero);
+        sc_v[a] = hn::Div(one, hn::Mul(dmd[a], vdelta));
+        ex_v[a] = hn::IfThenElseZero(up, one);
+        const VD m = hn::IfThenElse(up, hn::Neg(margin), margin);
+        of_v[a] = hn::Sub(hn::Mul(hn::Sub(m, hn::Set(dd, om[a])), sc_v[a]), half);
+        hn::Store(ex_v[a], dd, exit[a]);
+        hn::Store(sc_v[a], dd, scale[a]);
+        hn::Store(of_v[a], dd, offset[a]);
+      }
+      // The march's first steps, in the lanes (Advance): from a fine voxel
+      // whose reach is kFastJumpReach or more a jump past the empty box around it
+      // (FastMarcher::State::skip_box), past a candidate outside the grid one
+      // step, until a candidate with a shorter reach or the end. That
+      // candidate's vector test is left to the march, marked dense so that it
+      // does not look the reach up again.
+      VD kv = k_start, checks = zero;
+      auto dense = hn::FirstN(dd, 0);
+      auto active = hn::AndNot(special, hn::And(valid, hn::Le(kv, k_end)));
+      while (!hn::AllFalse(dd, active)) {
+        const VF kf = hn::DemoteTo(dfh, kv);  // kv is an integer below 2^51: float(int64) rounds the same
+        const VF t = hn::Mul(hn::Add(kf, hn::Set(dfh, 0.5f)), hn::Set(dfh, delta));
+        VI vox[3];
+        auto inside_f = hn::FirstN(dfh, hn::Lanes(dfh));
+        for (int a = 0; a < 3; ++a) {
+          const VF p = hn::Add(hn::Set(dfh, m0.origin[a]), hn::Mul(fdir[a], t));
+          inside_f = hn::And(inside_f, hn::And(hn::Ge(p, hn::Zero(dfh)), hn::Le(p, hn::Set(dfh, grid_hi))));
+          vox[a] = hn::Min(hn::ConvertTo(di32, p), hn::Set(di32, model.micro_res - 1));
         }
-        MicroRay mr = m0;
-        mr.dir = Vec3f{dm[0][l], dm[1][l], dm[2][l]};
-        const double z[3] = {0, 0, 0};
-        marchers[r].assign(model, skip, mr, 0, -1, z, z, z);
-        dx[r] = float(dir[0][l]);
-        dy[r] = float(dir[1][l]);
-        dz[r] = float(dir[2][l]);
-        hit_aabb[r] = flags[3][l] != 0 && flags[1][l] != 0 && aabb_far[l] >= 0;
+        const auto inside_i = hn::RebindMask(di32, inside_f);
+        const VI fr = hn::Set(di32, skip.res);
+        const VI fine =
+            hn::Add(hn::ShiftRight<2>(vox[0]),
+                    hn::Mul(fr, hn::Add(hn::ShiftRight<2>(vox[1]), hn::Mul(fr, hn::ShiftRight<2>(vox[2])))));
+        const VI e = hn::And(hn::GatherOffset(di32, reach, hn::IfThenElseZero(inside_i, fine)), hn::Set(di32, 0xFF));
+        const auto far_i = hn::And(inside_i, hn::Gt(e, hn::Set(di32, kFastJumpReach - 1)));
+        // skip_box(k, lo, size): lo = 4 (v >> 2) - e per axis, size = 4 + 2 e.
+        const VD size_d = hn::PromoteTo(dd, hn::Add(hn::Add(e, e), hn::Set(di32, 4)));
+        VD xs[3];
+        for (int a = 0; a < 3; ++a) {
+          const VI lo = hn::Sub(hn::ShiftLeft<2>(hn::ShiftRight<2>(vox[a])), e);
+          xs[a] = hn::Add(hn::Mul(hn::Add(hn::PromoteTo(dd, lo), hn::Mul(size_d, ex_v[a])), sc_v[a]), of_v[a]);
+        }
+        const VD xm = StdMin(xs[0], StdMin(xs[1], xs[2]));
+        const VD floor_x = hn::Floor(StdMax(xm, hn::Set(dd, -4e18)));
+        const VD jump =
+            hn::IfThenElse(hn::Lt(xm, k_end), StdMax(hn::Add(kv, one), hn::Add(floor_x, one)), hn::Add(k_end, one));
+        const auto inside = WidenMask(dd, di32, inside_i);
+        const auto far = hn::And(active, WidenMask(dd, di32, far_i));
+        const auto outside = hn::AndNot(inside, active);
+        kv = hn::IfThenElse(far, jump, hn::IfThenElse(outside, hn::Add(kv, one), kv));
+        const auto stop = hn::AndNot(far, hn::And(active, inside));
+        checks = hn::Add(checks, hn::IfThenElseZero(hn::Or(far, stop), one));
+        dense = hn::Or(dense, stop);
+        active = hn::And(hn::Or(far, outside), hn::Le(kv, k_end));
       }
-      continue;
+      hn::Store(checks, dd, kk[2]);
+      hn::Store(hn::IfThenElseZero(dense, one), dd, flags[4]);
+      hn::Store(kv, dd, kk[0]);
+      hn::Store(k_end, dd, kk[1]);
     }
-    // The ray's start: the candidate before the one at or past t_start (the
-    // candidates before it end a step or more before t_start).
-    const VD k_start =
-        StdMax(k, hn::Sub(hn::Floor(StdMin(hn::Sub(hn::Div(hn::Load(dd, ts), vdelta), half), hn::Set(dd, 4e18))), one));
-    const VD t_max = hn::Mul(hn::Add(k_end, hn::Set(dd, 1.5)), vdelta);
-    VD max_coord = hn::Set(dd, R);
-    for (int a = 0; a < 3; ++a)
-      max_coord = StdMax(max_coord, hn::Add(hn::Set(dd, std::abs(om[a])), hn::Mul(hn::Abs(dmd[a]), t_max)));
-    const VD margin = hn::Mul(max_coord, hn::Set(dd, 1.0 / 524288.0));
-    VD ex_v[3], sc_v[3], of_v[3];
-    for (int a = 0; a < 3; ++a) {
-      const auto up = hn::Gt(dmd[a], zero);
-      sc_v[a] = hn::Div(one, hn::Mul(dmd[a], vdelta));
-      ex_v[a] = hn::IfThenElseZero(up, one);
-      const VD m = hn::IfThenElse(up, hn::Neg(margin), margin);
-      of_v[a] = hn::Sub(hn::Mul(hn::Sub(m, hn::Set(dd, om[a])), sc_v[a]), half);
-      hn::Store(ex_v[a], dd, exit[a]);
-      hn::Store(sc_v[a], dd, scale[a]);
-      hn::Store(of_v[a], dd, offset[a]);
-    }
-    // The march's first steps, in the lanes (Advance): from a fine voxel
-    // whose reach is kFastJumpReach or more a jump past the empty box around it
-    // (FastMarcher::State::skip_box), past a candidate outside the grid one
-    // step, until a candidate with a shorter reach or the end. That
-    // candidate's vector test is left to the march, marked dense so that it
-    // does not look the reach up again.
-    VD kv = k_start, checks = zero;
-    auto dense = hn::FirstN(dd, 0);
-    auto active = hn::AndNot(special, hn::And(valid, hn::Le(kv, k_end)));
-    while (!hn::AllFalse(dd, active)) {
-      const VF kf = hn::DemoteTo(dfh, kv);  // kv is an integer below 2^51: float(int64) rounds the same
-      const VF t = hn::Mul(hn::Add(kf, hn::Set(dfh, 0.5f)), hn::Set(dfh, delta));
-      VI vox[3];
-      auto inside_f = hn::FirstN(dfh, hn::Lanes(dfh));
-      for (int a = 0; a < 3; ++a) {
-        const VF p = hn::Add(hn::Set(dfh, m0.origin[a]), hn::Mul(fdir[a], t));
-        inside_f = hn::And(inside_f, hn::And(hn::Ge(p, hn::Zero(dfh)), hn::Le(p, hn::Set(dfh, grid_hi))));
-        vox[a] = hn::Min(hn::ConvertTo(di32, p), hn::Set(di32, model.micro_res - 1));
-      }
-      const auto inside_i = hn::RebindMask(di32, inside_f);
-      const VI fr = hn::Set(di32, skip.res);
-      const VI fine = hn::Add(hn::ShiftRight<2>(vox[0]),
-                              hn::Mul(fr, hn::Add(hn::ShiftRight<2>(vox[1]), hn::Mul(fr, hn::ShiftRight<2>(vox[2])))));
-      const VI e = hn::And(hn::GatherOffset(di32, reach, hn::IfThenElseZero(inside_i, fine)), hn::Set(di32, 0xFF));
-      const auto far_i = hn::And(inside_i, hn::Gt(e, hn::Set(di32, kFastJumpReach - 1)));
-      // skip_box(k, lo, size): lo = 4 (v >> 2) - e per axis, size = 4 + 2 e.
-      const VD size_d = hn::PromoteTo(dd, hn::Add(hn::Add(e, e), hn::Set(di32, 4)));
-      VD xs[3];
-      for (int a = 0; a < 3; ++a) {
-        const VI lo = hn::Sub(hn::ShiftLeft<2>(hn::ShiftRight<2>(vox[a])), e);
-        xs[a] = hn::Add(hn::Mul(hn::Add(hn::PromoteTo(dd, lo), hn::Mul(size_d, ex_v[a])), sc_v[a]), of_v[a]);
-      }
-      const VD xm = StdMin(xs[0], StdMin(xs[1], xs[2]));
-      const VD floor_x = hn::Floor(StdMax(xm, hn::Set(dd, -4e18)));
-      const VD jump =
-          hn::IfThenElse(hn::Lt(xm, k_end), StdMax(hn::Add(kv, one), hn::Add(floor_x, one)), hn::Add(k_end, one));
-      const auto inside = WidenMask(dd, di32, inside_i);
-      const auto far = hn::And(active, WidenMask(dd, di32, far_i));
-      const auto outside = hn::AndNot(inside, active);
-      kv = hn::IfThenElse(far, jump, hn::IfThenElse(outside, hn::Add(kv, one), kv));
-      const auto stop = hn::AndNot(far, hn::And(active, inside));
-      checks = hn::Add(checks, hn::IfThenElseZero(hn::Or(far, stop), one));
-      dense = hn::Or(dense, stop);
-      active = hn::And(hn::Or(far, outside), hn::Le(kv, k_end));
-    }
-    hn::Store(checks, dd, kk[2]);
-    hn::Store(hn::IfThenElseZero(dense, one), dd, flags[4]);
-    hn::Store(kv, dd, kk[0]);
-    hn::Store(k_end, dd, kk[1]);
     hn::Store(af, dd, aabb_far);
-    hn::Store(hn::IfThenElseZero(valid, one), dd, flags[0]);
+    hn::Store(none ? zero : hn::IfThenElseZero(valid, one), dd, flags[0]);
     hn::Store(hn::IfThenElseZero(has_candidates, one), dd, flags[3]);
     hn::Store(hn::IfThenElseZero(hn::Le(an, af), one), dd, flags[1]);
     hn::Store(hn::IfThenElseZero(special, one), dd, flags[2]);
