@@ -289,11 +289,29 @@ class TileRenderer {
       w.begin[r] = uint32_t(base + size_t(i) * size_t(limit));
       w.end[r] = w.begin[r] + uint32_t(counts[i]);
       w.gathered[w.n_gathered++] = r;
+    }
+    // The samples per MLP, counted by runs of one MLP (a ray's samples
+    // mostly share their coarse voxel): no chain of increments of one
+    // counter through memory.
+    uint32_t run_mlp = 0, run = 0;
+    auto flush = [&] {
+      if (run == 0) return;
+      if (w.count[run_mlp] == 0) w.used.push_back(run_mlp);
+      w.count[run_mlp] += run;
+    };
+    for (int i = 0; i < g; ++i) {
+      const int r = group[i];
       for (uint32_t j = w.begin[r]; j < w.end[r]; ++j) {
         const uint32_t mlp = w.samples[j].mlp;
-        if (w.count[mlp]++ == 0) w.used.push_back(mlp);
+        if (mlp != run_mlp || run == 0) {
+          flush();
+          run_mlp = mlp;
+          run = 0;
+        }
+        ++run;
       }
     }
+    flush();
     w.n_samples = base + size_t(g) * size_t(limit);
   }
 
@@ -309,13 +327,24 @@ class TileRenderer {
       w.count[u] = 0;
     }
     if (w.order.size() < at) w.order.resize(at);
-    for (int a = 0; a < w.n_gathered; ++a) {  // the samples in the order they were marched
+    // The samples in the order they were marched, each MLP's cursor kept
+    // in a register while its run lasts.
+    uint32_t cur = 0, pos = 0;
+    bool open = false;
+    for (int a = 0; a < w.n_gathered; ++a) {
       const int r = w.gathered[a];
       for (uint32_t i = w.begin[r]; i < w.end[r]; ++i) {
         const uint32_t u = samples[i].mlp;
-        w.order[w.first[u] + w.count[u]++] = i;
+        if (!open || u != cur) {
+          if (open) w.count[cur] = pos - w.first[cur];
+          cur = u;
+          pos = w.first[u] + w.count[u];
+          open = true;
+        }
+        w.order[pos++] = i;
       }
     }
+    if (open) w.count[cur] = pos - w.first[cur];
   }
 
   const FastModel& fm_;

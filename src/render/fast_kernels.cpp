@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstddef>
 #include <cstring>
 #include <limits>
 #include <vector>
@@ -33,6 +34,15 @@ constexpr size_t kCap = HWY_MAX_BYTES / sizeof(float);
 // Block vertices of the 8 corners of a micro voxel, relative to corner
 // (0, 0, 0), in the reference's corner order (x fastest).
 constexpr uint32_t kCornerVertex[8] = {0, 1, 5, 6, 25, 26, 30, 31};
+
+// A FastSample as 32-bit words (the kernels gather its fields).
+static_assert(sizeof(FastSample) == 6 * sizeof(uint32_t), "FastSample: six 32-bit words");
+constexpr int32_t kSampleWords = 6;
+constexpr int32_t kSampleRay = offsetof(FastSample, ray) / 4, kSampleVertex = offsetof(FastSample, vertex) / 4,
+                  kSampleFx = offsetof(FastSample, fx) / 4;
+static_assert(offsetof(FastSample, fy) == offsetof(FastSample, fx) + 4 &&
+                  offsetof(FastSample, fz) == offsetof(FastSample, fx) + 8,
+              "FastSample: fx, fy, fz in a row");
 
 // Int8: samples are run in segments of at most this many, whose rays' direction
 // parts are computed once per ray (slot) before the samples' chunks.
@@ -480,18 +490,27 @@ void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, const
               const uint32_t* order, size_t valid, const int32_t* slots, const float* dir, size_t ray_stride,
               float delta, Scratch& s, FastSampleOut* out, FastKernelSeconds* seconds) {
   const size_t N = hn::Lanes(d);
+  const hn::RebindToSigned<DT> di;
+  // The lanes' samples (the tail repeats the last), their fields gathered
+  // from the records (6 words each).
+  alignas(64) int32_t word[kCap], slot[kCap];
   for (size_t l = 0; l < N; ++l) {
     const size_t i = std::min(l, valid - 1);
-    const FastSample& x = samples[order[i]];
-    s.fx[l] = x.fx;
-    s.fy[l] = x.fy;
-    s.fz[l] = x.fz;
-    s.vertex[l] = x.vertex;
-    s.ray[l] = x.ray;
-    s.slot[l] = kInt8 ? slots[i] : 0;
+    word[l] = int32_t(order[i]) * kSampleWords;
+    slot[l] = kInt8 ? slots[i] : 0;
   }
-  s.slot_base = s.slot[0];
-  for (size_t l = 0; l < N; ++l) s.slot[l] -= s.slot_base;
+  const auto at = hn::Load(di, word);
+  const int32_t* rec = reinterpret_cast<const int32_t*>(samples);
+  const float* recf = reinterpret_cast<const float*>(samples);
+  hn::Store(hn::GatherIndex(d, recf + kSampleFx, at), d, s.fx);
+  hn::Store(hn::GatherIndex(d, recf + kSampleFx + 1, at), d, s.fy);
+  hn::Store(hn::GatherIndex(d, recf + kSampleFx + 2, at), d, s.fz);
+  hn::Store(hn::BitCast(hn::RebindToUnsigned<DT>(), hn::GatherIndex(di, rec + kSampleVertex, at)),
+            hn::RebindToUnsigned<DT>(), s.vertex);
+  hn::Store(hn::BitCast(hn::RebindToUnsigned<DT>(), hn::GatherIndex(di, rec + kSampleRay, at)),
+            hn::RebindToUnsigned<DT>(), s.ray);
+  s.slot_base = slot[0];
+  hn::Store(hn::Sub(hn::Load(di, slot), hn::Set(di, s.slot_base)), di, s.slot);
   EvalChunk<kInt8>(d, N, fm, p, q, dir, ray_stride, delta, s, seconds);
   for (size_t l = 0; l < valid; ++l) {
     FastSampleOut& o = out[order[l]];
