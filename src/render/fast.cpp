@@ -303,7 +303,7 @@ class TileRenderer {
       const int r = group[i];
       for (uint32_t j = w.begin[r]; j < w.end[r]; ++j) {
         const uint32_t mlp = w.samples[j].mlp;
-        if (mlp != run_mlp || run == 0) {
+        if (mlp != run_mlp) {
           flush();
           run_mlp = mlp;
           run = 0;
@@ -329,22 +329,21 @@ class TileRenderer {
     if (w.order.size() < at) w.order.resize(at);
     // The samples in the order they were marched, each MLP's cursor kept
     // in a register while its run lasts.
-    uint32_t cur = 0, pos = 0;
-    bool open = false;
+    constexpr uint32_t kNone = UINT32_MAX;  // no MLP (indices are below the MLP count)
+    uint32_t cur = kNone, pos = 0;
     for (int a = 0; a < w.n_gathered; ++a) {
       const int r = w.gathered[a];
       for (uint32_t i = w.begin[r]; i < w.end[r]; ++i) {
         const uint32_t u = samples[i].mlp;
-        if (!open || u != cur) {
-          if (open) w.count[cur] = pos - w.first[cur];
+        if (u != cur) {
+          if (cur != kNone) w.count[cur] = pos - w.first[cur];
           cur = u;
           pos = w.first[u] + w.count[u];
-          open = true;
         }
         w.order[pos++] = i;
       }
     }
-    if (open) w.count[cur] = pos - w.first[cur];
+    if (cur != kNone) w.count[cur] = pos - w.first[cur];
   }
 
   const FastModel& fm_;

@@ -390,16 +390,17 @@ void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, c
   }
 }
 
-// Rows [G, G + D) of X: direction value k of ray rays[l] in lane l.
+// Rows [G, G + D) of X: direction value k of ray rays[l] in lane l (floats,
+// or with int32 lanes the byte form's packed words).
 template <class DT>
-void GatherDirections(DT d, size_t N, const float* dir, size_t ray_stride, const uint32_t* rays, int G, int D,
-                      float* X) {
+void GatherDirections(DT d, size_t N, const hn::TFromD<DT>* dir, size_t ray_stride, const uint32_t* rays, int G, int D,
+                      hn::TFromD<DT>* X) {
   const hn::RebindToSigned<DT> di;
   const auto ray = hn::BitCast(di, hn::Load(hn::RebindToUnsigned<DT>(), rays));
   // Consecutive rays (the common case: neighbouring pixels): plain loads.
   const bool run = hn::AllTrue(di, hn::Eq(ray, hn::Add(hn::Set(di, int32_t(rays[0])), hn::Iota(di, 0))));
   for (int k = 0; k < D; ++k) {
-    const float* row = dir + size_t(k) * ray_stride;
+    const hn::TFromD<DT>* row = dir + size_t(k) * ray_stride;
     hn::Store(run ? hn::LoadU(d, row + rays[0]) : hn::GatherIndex(d, row, ray), d, X + size_t(G + k) * N);
   }
 }
@@ -421,8 +422,8 @@ void DirectionParts(DT d, size_t N, const FastModel& fm, const float* p, const i
       // The byte form: the rays' packed direction bytes (the rows after the
       // D values: fast_direction_rows) read as words, 4 inputs per product.
       const int words = (D + 3) / 4;
-      GatherDirections(d, N, dir + size_t(D) * ray_stride, ray_stride, lane_rays, 0, words,
-                       reinterpret_cast<float*>(s.xq));
+      GatherDirections(hn::RebindToSigned<DT>(), N, reinterpret_cast<const int32_t*>(dir + size_t(D) * ray_stride),
+                       ray_stride, lane_rays, 0, words, s.xq);
       DirectionBytes(d, N, s.xq, words, q + L.dwq, q + L.dbq, L.out, p[fm.dir_in], s.dir_q + j0);
       continue;
     }
@@ -499,16 +500,15 @@ void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, const
     word[l] = int32_t(order[i]) * kSampleWords;
     slot[l] = kInt8 ? slots[i] : 0;
   }
+  const hn::RebindToUnsigned<DT> du;
   const auto at = hn::Load(di, word);
-  const int32_t* rec = reinterpret_cast<const int32_t*>(samples);
+  const uint32_t* rec = reinterpret_cast<const uint32_t*>(samples);
   const float* recf = reinterpret_cast<const float*>(samples);
   hn::Store(hn::GatherIndex(d, recf + kSampleFx, at), d, s.fx);
   hn::Store(hn::GatherIndex(d, recf + kSampleFx + 1, at), d, s.fy);
   hn::Store(hn::GatherIndex(d, recf + kSampleFx + 2, at), d, s.fz);
-  hn::Store(hn::BitCast(hn::RebindToUnsigned<DT>(), hn::GatherIndex(di, rec + kSampleVertex, at)),
-            hn::RebindToUnsigned<DT>(), s.vertex);
-  hn::Store(hn::BitCast(hn::RebindToUnsigned<DT>(), hn::GatherIndex(di, rec + kSampleRay, at)),
-            hn::RebindToUnsigned<DT>(), s.ray);
+  hn::Store(hn::GatherIndex(du, rec + kSampleVertex, at), du, s.vertex);
+  hn::Store(hn::GatherIndex(du, rec + kSampleRay, at), du, s.ray);
   s.slot_base = slot[0];
   hn::Store(hn::Sub(hn::Load(di, slot), hn::Set(di, s.slot_base)), di, s.slot);
   EvalChunk<kInt8>(d, N, fm, p, q, dir, ray_stride, delta, s, seconds);
