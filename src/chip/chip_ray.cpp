@@ -47,15 +47,28 @@ uint64_t first_true_steps(int64_t lo, int64_t hi, int64_t e) {
   return steps + uint64_t(std::bit_width(n));  // n = 2^b - 1: b more steps
 }
 
-// first_true(lo, hi, pred) found from a guess: a few steps from it, checked
-// exactly (pred(e - 1) false unless e == lo, pred(e) true unless e == hi),
-// and bisection on what remains if the guess is far off. The predicate must
-// be monotone on [lo, hi).
+// A search's first guess ceil(y) as an integer, clamped to +-2^62 (far past
+// any candidate range), or kNoGuess for a y that is not finite. Clamping it
+// to a range [lo, hi - 1] gives what clamping ceil(y) as a double and
+// converting it gives.
+constexpr int64_t kNoGuess = std::numeric_limits<int64_t>::min();
+int64_t guess_index(double y) {
+  constexpr double kFar = 0x1p62;
+  if (!(y > -kFar && y < kFar))
+    return std::isnan(y) || std::isinf(y) ? kNoGuess : (y > 0 ? int64_t(kFar) : -int64_t(kFar));
+  const int64_t t = int64_t(y);  // truncation toward zero
+  return t + (double(t) < y ? 1 : 0);
+}
+
+// first_true(lo, hi, pred) found from a guess (guess_index; kNoGuess: start
+// in the middle): a few steps from it, checked exactly (pred(e - 1) false
+// unless e == lo, pred(e) true unless e == hi), and bisection on what remains
+// if the guess is far off. The predicate must be monotone on [lo, hi).
 template <class Pred>
-int64_t first_true_from(int64_t lo, int64_t hi, double guess, Pred pred) {
+int64_t first_true_from(int64_t lo, int64_t hi, int64_t guess, Pred pred) {
   if (lo >= hi) return lo;
   constexpr int kWalk = 4;
-  const int64_t g = std::isfinite(guess) ? int64_t(std::clamp(guess, double(lo), double(hi - 1))) : lo + (hi - lo) / 2;
+  const int64_t g = guess != kNoGuess ? std::clamp(guess, lo, hi - 1) : lo + (hi - lo) / 2;
   int64_t e = g;
   if (pred(g)) {
     for (int n = 0; e > lo && pred(e - 1); --e)
@@ -209,7 +222,7 @@ int64_t RayMath::cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Ve
         kept[1] = kept[0];
         FaceCrossing& x = kept[0];
         x.face = face;
-        x.guess = std::ceil((double(face) - r.origin[a]) / (d * step_) - 0.5);
+        x.guess = guess_index((double(face) - r.origin[a]) / (d * step_) - 0.5);
         const double o = r.origin[a];
         const Threshold th = thresholds_[size_t(face)];
         if (d > 0)
@@ -225,7 +238,7 @@ int64_t RayMath::cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Ve
       }
     }
     const FaceCrossing& x = kept[0];
-    const int64_t g = std::isfinite(x.guess) ? int64_t(std::clamp(x.guess, double(lo), double(hi - 1))) : hi - 1;
+    const int64_t g = x.guess != kNoGuess ? std::clamp(x.guess, lo, hi - 1) : hi - 1;
     const int64_t e = std::min(x.first, hi);
     n += exit_search_steps(lo, hi, g, e);
     best = e;  // e <= hi == best
@@ -334,7 +347,7 @@ KInterval RayMath::box_interval(const ChipRay& r, const PreparedBox& box, uint64
     }
     // Inside along this axis: a run [enter, leave) of k (the coordinate is monotone).
     const double o = r.origin[a];
-    auto k_at = [&](double face) { return std::ceil((face - o) / (d * step_) - 0.5); };
+    auto k_at = [&](double face) { return guess_index((face - o) / (d * step_) - 0.5); };
     int64_t enter, leave;
     if (box.fast[size_t(a)]) {
       const Threshold at_lo = box.at_least_lo[size_t(a)], past_hi = box.above_hi[size_t(a)];

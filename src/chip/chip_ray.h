@@ -125,7 +125,7 @@ class RayMath {
   // new ray.
   struct FaceCrossing {
     int face = 0;       // micro-grid coordinate of the face; 0: none (never a far face that is searched)
-    double guess = 0;   // the search's first guess for it
+    int64_t guess = 0;  // the search's first guess for it (see guess_index in chip_ray.cpp)
     int64_t first = 0;  // min(first candidate past it, k_limit)
   };
   struct ExitMemo {

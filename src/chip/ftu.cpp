@@ -9,6 +9,17 @@ namespace edrnr::chip {
 namespace {
 constexpr int kLeafCellMicro = 2;
 
+// Voxel indices here are never negative (micro indices are clamped to
+// [0, Rm)), so unsigned division (a shift) gives the signed quotient.
+Vec3i coarse_of(const Vec3i& fine) {
+  return {int(unsigned(fine.x) / kFinePerCoarse), int(unsigned(fine.y) / kFinePerCoarse),
+          int(unsigned(fine.z) / kFinePerCoarse)};
+}
+Vec3i leaf_cell_of(const Vec3i& micro) {
+  return {int(unsigned(micro.x) / kLeafCellMicro), int(unsigned(micro.y) / kLeafCellMicro),
+          int(unsigned(micro.z) / kLeafCellMicro)};
+}
+
 int micro_bit(int lx, int ly, int lz) { return lx + kMicroPerFine * (ly + kMicroPerFine * lz); }
 
 // Whether any of the 8 micro bits of leaf voxel (leaf_x, leaf_y, leaf_z) is set.
@@ -75,7 +86,7 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
       } else {
         f = known_f[size_t(r)];
       }
-      const Vec3i c{f.x / kFinePerCoarse, f.y / kFinePerCoarse, f.z / kFinePerCoarse};
+      const Vec3i c = coarse_of(f);
       if (linear_index(c.x, c.y, c.z, cr) != cv_tag) continue;
       active |= uint8_t(1u << r);
       fv[size_t(r)] = f;
@@ -120,22 +131,22 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
         if (!m_known) m = math_.micro_voxel_at(ray.ray, k);
         m_known = false;
         ++counters_.position_evals;
-        const Vec3i leaf{(m.x - base.x) / 2, (m.y - base.y) / 2, (m.z - base.z) / 2};
+        const Vec3i leaf = leaf_cell_of(m - base);
         ++counters_.leaf_checks;
         if (!leaf_occupied(word, leaf.x, leaf.y, leaf.z)) {
-          const Vec3i leaf_cell{m.x / kLeafCellMicro, m.y / kLeafCellMicro, m.z / kLeafCellMicro};
+          const Vec3i leaf_cell = leaf_cell_of(m);
           k = math_.cell_exit(ray.ray, k, k_exit, leaf_cell, kLeafCellMicro, &counters_.position_evals, memo,
                               ray.k_end);
           continue;
         }
         // Occupied leaf: test each candidate until the ray leaves the leaf.
-        const Vec3i leaf_cell{m.x / kLeafCellMicro, m.y / kLeafCellMicro, m.z / kLeafCellMicro};
+        const Vec3i leaf_cell = leaf_cell_of(m);
         Vec3i last_micro{-1, -1, -1};
         bool last_occupied = false;
         for (bool first = true; k < k_exit; ++k, first = false) {
           const Vec3i mk = first ? m : math_.micro_voxel_at(ray.ray, k);
           ++counters_.position_evals;
-          if (Vec3i{mk.x / kLeafCellMicro, mk.y / kLeafCellMicro, mk.z / kLeafCellMicro} != leaf_cell) {
+          if (leaf_cell_of(mk) != leaf_cell) {
             m = mk;
             m_known = true;
             break;

@@ -19,31 +19,28 @@ LfauSelection lfau_select(const std::array<Vec3i, kRaysPerPacket>& voxel, uint8_
     // EN1, EN2, EN3 at once: the most lagging voxel is the least of the
     // oriented (X, Y, Z) in lexicographic order, compared as one packed key
     // (21 bits per axis, offset to be non-negative). Equal keys are equal
-    // voxels, so the winners are the rays whose key is the least.
+    // voxels, so the winners are the rays whose key is the least, led by the
+    // lowest-numbered of them.
     constexpr int kField = 21;
-    constexpr int kOffset = 1 << (kField - 1);
+    constexpr uint32_t kOffset = 1u << (kField - 1);
     std::array<uint64_t, kRaysPerPacket> key{};
     uint64_t best = ~uint64_t(0);
-    int lead = -1;
-    bool packed = true;
+    uint32_t out_of_range = 0;  // a high bit set: some oriented index does not fit its field
     for (int r = 0; r < kRaysPerPacket; ++r) {
       if (!(active_mask >> r & 1)) continue;
       uint64_t k = 0;
       for (int axis = 0; axis < 3; ++axis) {
-        const int oriented = voxel[size_t(r)][axis] * travel_sign[axis];
-        packed &= oriented >= -kOffset && oriented < kOffset;
-        k = k << kField | uint64_t(uint32_t(oriented + kOffset) & ((1u << kField) - 1));
+        const uint32_t field = uint32_t(voxel[size_t(r)][axis] * travel_sign[axis]) + kOffset;
+        out_of_range |= field;
+        k = k << kField | field;
       }
       key[size_t(r)] = k;
-      if (k < best) {  // strictly less: the lowest-numbered ray of a tie leads
-        best = k;
-        lead = r;
-      }
+      best = k < best ? k : best;
     }
-    if (packed) {
-      out.voxel = voxel[size_t(lead)];
+    if (out_of_range >> kField == 0) {
       for (int r = 0; r < kRaysPerPacket; ++r)
         if ((active_mask >> r & 1) && key[size_t(r)] == best) out.selected_mask |= uint8_t(1u << r);
+      out.voxel = voxel[size_t(std::countr_zero(unsigned(out.selected_mask)))];
       return out;
     }
   }

@@ -34,11 +34,7 @@ void RpRob::note_recent(uint32_t tag) {
 
 bool RpRob::in_recent(uint32_t tag) const { return std::find(recent_.begin(), recent_.end(), tag) != recent_.end(); }
 
-bool RpRob::insert(uint32_t rp, uint32_t tag) {
-  if (refused_version_ == version_ && refused_rp_ == rp && refused_tag_ == tag) {
-    ++counters_.insert_refusals;  // nothing changed since the same insert was refused
-    return false;
-  }
+bool RpRob::insert_scan(uint32_t rp, uint32_t tag) {
   if (rp < where_.size() && where_[rp].held)
     throw std::logic_error("RP-ROB insert: RP " + std::to_string(rp) + " is already held");
   int chosen = -1;
@@ -59,12 +55,13 @@ bool RpRob::insert(uint32_t rp, uint32_t tag) {
   }
   if (chosen < 0) {
     ++counters_.insert_refusals;
-    refused_version_ = version_;
+    refused_version_ = capacity_version_;
     refused_rp_ = rp;
     refused_tag_ = tag;
     return false;
   }
   ++version_;
+  ++capacity_version_;
   Entry& en = entries_[size_t(chosen)];
   if (en.count == 0) en.tag = tag;
   ++en.count;
@@ -172,6 +169,7 @@ void RpRob::retire(uint32_t rp) {
   p = Place{};
   --held_;
   ++version_;
+  ++capacity_version_;
   ++counters_.retires;
 }
 

@@ -89,7 +89,13 @@ class RpRob {
   // Throws Error if a size is not positive.
   explicit RpRob(const RpRobConfig& config);
 
-  bool insert(uint32_t rp, uint32_t tag);
+  bool insert(uint32_t rp, uint32_t tag) {
+    if (insert_known_refused(rp, tag)) {
+      ++counters_.insert_refusals;  // no entry's count changed since the same insert was refused
+      return false;
+    }
+    return insert_scan(rp, tag);
+  }
   std::optional<ScheduledRp> schedule();
   void reschedule(uint32_t rp);  // throws std::logic_error unless rp is in flight
   void retire(uint32_t rp);      // throws std::logic_error unless rp is in flight
@@ -115,7 +121,7 @@ class RpRob {
   bool schedule_known_empty() const { return nothing_version_ == version_; }
   // ... whether insert(rp, tag) would be refused without looking ...
   bool insert_known_refused(uint32_t rp, uint32_t tag) const {
-    return refused_version_ == version_ && refused_rp_ == rp && refused_tag_ == tag;
+    return refused_version_ == capacity_version_ && refused_rp_ == rp && refused_tag_ == tag;
   }
   // ... and the refused insert asked again `times` times in such cycles.
   void repeat_refused_insert(uint64_t times) { counters_.insert_refusals += times; }
@@ -141,7 +147,8 @@ class RpRob {
   void note_recent(uint32_t tag);
   bool in_recent(uint32_t tag) const;
   ScheduledRp pop(int e);
-  std::optional<ScheduledRp> schedule_scan();  // schedule() without the memo
+  std::optional<ScheduledRp> schedule_scan();   // schedule() without the memo
+  bool insert_scan(uint32_t rp, uint32_t tag);  // insert() without the memo
   Place& in_flight_place(uint32_t rp, const char* op);
 
   RpRobConfig config_;
@@ -156,7 +163,11 @@ class RpRob {
   // answered the same way while the version stays (the CTU and the FTU ask
   // again every cycle they wait), without scanning the entries again.
   uint64_t version_ = 0;
-  uint64_t refused_version_ = ~uint64_t(0);  // insert(refused_rp_, refused_tag_) was refused then
+  // Whether an insert is refused depends on the entries' counts and tags
+  // only, which change when an RP is inserted or retires: those bump
+  // capacity_version_ (a schedule or a reschedule does not).
+  uint64_t capacity_version_ = 0;
+  uint64_t refused_version_ = ~uint64_t(0);  // insert(refused_rp_, refused_tag_) was refused at this capacity_version_
   uint32_t refused_rp_ = 0, refused_tag_ = 0;
   uint64_t nothing_version_ = ~uint64_t(0);  // schedule() had nothing to give then
   bool has_last_scheduled_ = false;

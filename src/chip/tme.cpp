@@ -430,6 +430,7 @@ void Tme::eval_batch_as(size_t samples, const int32_t* features, const TmeDirect
   // Colour net input: density outputs, then the direction encoding.
   const int G = m.density.back().out;
   const bool geo_kernel = row_kernels && m.geo_row.vector;
+  size_t last_term = 0;
   if (geo_kernel)
     saturations += tme_requant_signed(x, W, samples, size_t(G), m.geo_row.bias.data(), m.geo_row.mult.data(),
                                       m.geo_row.half.data(), m.geo_row.shift.data(), act, y, W);
@@ -441,15 +442,18 @@ void Tme::eval_batch_as(size_t samples, const int32_t* features, const TmeDirect
     const TmeDirection* d = dirs[s];
     saturations += d->saturations;
     if (m.color.empty()) continue;
-    // The ray's direction terms: found among the batch's few rays, or made.
-    size_t k = 0;
-    while (k < term_dirs_.size() && term_dirs_[k] != d) ++k;
+    // The ray's direction terms: those of the sample before (a ray's samples
+    // come together), else found among the batch's rays, or made.
+    size_t k = last_term;
+    if (k >= term_dirs_.size() || term_dirs_[k] != d)
+      for (k = 0; k < term_dirs_.size() && term_dirs_[k] != d;) ++k;
     if (k == term_dirs_.size()) {
       term_dirs_.push_back(d);
       if (terms_.size() < term_dirs_.size()) terms_.resize(term_dirs_.size());
       direction_terms<M>(m.color.front(), G, m.dir_in, *d, terms_[k]);
     }
     term_index_[s] = uint32_t(k);
+    last_term = k;
   }
   for (size_t s = 0; s < samples && !m.color.empty(); ++s) term_of_sample_[s] = &terms_[term_index_[s]];
   term_dirs_.clear();

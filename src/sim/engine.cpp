@@ -112,10 +112,6 @@ void Engine::run() {
     mem_.advance(cycle_, completions_);
     for (const MemoryCompletion& c : completions_) deliver(c);
     retry_fills();
-    fe_out_.sample(cycle_);
-    retire_q_.sample(cycle_);
-    tme_in_.sample(cycle_);
-    vru_in_.sample(cycle_);
     if (zorg_.done() && !fe_.holding && buffer_.in_use() == 0 && mem_.idle()) break;
     quiet = (any_busy_ || !mem_.idle()) ? 0 : quiet + 1;
     if (quiet > opt_.deadlock_cycles)

@@ -73,14 +73,10 @@ uint64_t Engine::quiet_until(uint64_t c) {
 }
 
 // Counts cycles [first, first + n) as quiet_until() found them: each unit
-// in its state, the FIFOs sampled, the memory clocks run, refused RP-ROB
-// inserts repeated.
+// in its state (the FIFOs count them when they next change), the memory
+// clocks run, refused RP-ROB inserts repeated.
 void Engine::skip(uint64_t first, uint64_t n) {
   for (uint32_t u = 0; u < kUnits; ++u) activity_.repeat(u, quiet_state_[u], first, n);
-  fe_out_.sample_repeat(first, n);
-  retire_q_.sample_repeat(first, n);
-  tme_in_.sample_repeat(first, n);
-  vru_in_.sample_repeat(first, n);
   if (ctu_s_.holding && first > ctu_s_.end) rob_.repeat_refused_insert(n);
   completions_.clear();
   mem_.advance(first + n - 1, completions_);  // the DRAM clocks, ticking only where it must

@@ -10,10 +10,16 @@
 //   in the same cycle sees it at once; latency 1 models one register stage and
 //   makes the result independent of the order units are evaluated in.
 // - Items leave in the order they entered.
-// - sample(cycle) is called once per simulated cycle (after the units ran) to
-//   collect the per-cycle statistics: cycles spent full, cycles with nothing
-//   visible to pop, and the occupancy summed over cycles.
+// - Per-cycle statistics (cycles spent full, cycles with nothing visible to
+//   pop, the occupancy summed over cycles) are counted without a call per
+//   cycle: between two pushes or pops the state is constant but for the
+//   head's visibility, so the cycles before a push or pop in cycle c are
+//   counted by it, each with the state it ended with. account_until(end)
+//   counts the cycles before `end` not yet counted (call it once the run is
+//   over, with the run's length in cycles, before reading the statistics);
+//   sample(cycle) is account_until(cycle + 1). Cycles are non-decreasing.
 // T must be default-constructible and movable (the storage is a ring buffer).
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -61,6 +67,7 @@ class Fifo {
   // Appends `item`, pushed in `cycle`. Precondition: can_push(); throws Error otherwise.
   void push(T item, uint64_t cycle) {
     if (full()) fail("fifo '{}': push while full (capacity {}); check can_push() first", name_, capacity());
+    account_until(cycle);
     size_t tail = head_ + count_;
     if (tail >= slots_.size()) tail -= slots_.size();
     Slot& s = slots_[tail];
@@ -97,6 +104,7 @@ class Fifo {
   // Removes and returns the oldest item. Precondition: can_pop(cycle); throws Error otherwise.
   T pop(uint64_t cycle) {
     if (!can_pop(cycle)) fail("fifo '{}': pop in cycle {} with no visible item", name_, cycle);
+    account_until(cycle);
     T out = std::move(slots_[head_].item);
     slots_[head_].item = T{};
     if (++head_ == slots_.size()) head_ = 0;
@@ -108,22 +116,22 @@ class Fifo {
   // The cycle the oldest item becomes visible; UINT64_MAX when empty.
   uint64_t head_visible_cycle() const { return count_ > 0 ? slots_[head_].visible_cycle : UINT64_MAX; }
 
-  // sample() for `cycles` consecutive cycles from `first` in which nothing is
-  // pushed or popped and the head's visibility does not change.
-  void sample_repeat(uint64_t first, uint64_t cycles) {
-    stats_.sampled_cycles += cycles;
-    if (full()) stats_.full_cycles += cycles;
-    if (!can_pop(first)) stats_.empty_cycles += cycles;
-    stats_.occupancy_sum += count_ * cycles;
+  // Counts cycles [first counted, end) in the statistics with the current
+  // state: occupancy and fullness constant, nothing visible to pop before the
+  // head's visible cycle.
+  void account_until(uint64_t end) {
+    if (end <= accounted_) return;
+    const uint64_t n = end - accounted_;
+    stats_.sampled_cycles += n;
+    if (full()) stats_.full_cycles += n;
+    const uint64_t visible = head_visible_cycle();  // UINT64_MAX when empty
+    if (visible > accounted_) stats_.empty_cycles += std::min(end, visible) - accounted_;
+    stats_.occupancy_sum += count_ * n;
+    accounted_ = end;
   }
 
-  // Per-cycle statistics; call once per simulated cycle.
-  void sample(uint64_t cycle) {
-    ++stats_.sampled_cycles;
-    if (full()) ++stats_.full_cycles;
-    if (!can_pop(cycle)) ++stats_.empty_cycles;
-    stats_.occupancy_sum += count_;
-  }
+  // The statistics of cycle `cycle` (and any before it not yet counted).
+  void sample(uint64_t cycle) { account_until(cycle + 1); }
 
   const FifoStats& stats() const { return stats_; }
 
@@ -154,6 +162,7 @@ class Fifo {
   std::vector<Slot> slots_;
   size_t head_ = 0;
   size_t count_ = 0;
+  uint64_t accounted_ = 0;  // cycles before this one are in stats_
   FifoStats stats_;
 };
 
