@@ -68,6 +68,54 @@ TEST(Fifo, SampleCountsFullAndEmptyCycles) {
   EXPECT_DOUBLE_EQ(s.mean_occupancy(), 1.0 / 3.0);
 }
 
+// The statistics of cycles without a push or pop are counted when the FIFO
+// next changes (or by account_until). Worked by hand, capacity 2, latency 2:
+// pushes in cycles 1 and 2 (visible from 3 and 4), a pop in cycle 5, cycles
+// 0..7 counted. Held: 0, 1, 2, 2, 2, 1, 1, 1 (sum 10); full in 2, 3, 4;
+// nothing visible in 0, 1, 2.
+TEST(Fifo, CyclesBetweenChangesAreCountedWithTheStateTheyHad) {
+  Fifo<int> f("q", 2, 2);
+  f.push(1, 1);
+  f.push(2, 2);
+  EXPECT_EQ(f.pop(5), 1);
+  f.account_until(8);
+  const FifoStats& s = f.stats();
+  EXPECT_EQ(s.sampled_cycles, 8u);
+  EXPECT_EQ(s.full_cycles, 3u);
+  EXPECT_EQ(s.empty_cycles, 3u);
+  EXPECT_EQ(s.occupancy_sum, 10u);
+  f.account_until(8);  // already counted
+  EXPECT_EQ(f.stats().sampled_cycles, 8u);
+}
+
+// The same random pushes and pops, one FIFO sampled every cycle and one
+// counted only at its changes and at the end: the same statistics.
+TEST(Fifo, CountingAtChangesEqualsSamplingEveryCycle) {
+  Fifo<int> every("a", 3, 2), lazy("b", 3, 2);
+  uint32_t rng = 12345;
+  auto next = [&] { return rng = rng * 1664525u + 1013904223u, rng >> 16; };
+  const uint64_t cycles = 5000;
+  for (uint64_t c = 0; c < cycles; ++c) {
+    if (next() % 3 == 0 && every.can_pop(c)) {
+      EXPECT_EQ(every.pop(c), lazy.pop(c));
+    }
+    if (next() % 2 == 0 && every.can_push()) {
+      every.push(int(c), c);
+      lazy.push(int(c), c);
+    }
+    every.sample(c);
+  }
+  lazy.account_until(cycles);
+  const FifoStats &a = every.stats(), &b = lazy.stats();
+  EXPECT_EQ(a.sampled_cycles, b.sampled_cycles);
+  EXPECT_EQ(a.full_cycles, b.full_cycles);
+  EXPECT_EQ(a.empty_cycles, b.empty_cycles);
+  EXPECT_EQ(a.occupancy_sum, b.occupancy_sum);
+  EXPECT_GT(a.full_cycles, 0u);  // the sequence exercises every case
+  EXPECT_GT(a.empty_cycles, 0u);
+  EXPECT_GT(a.pops, 1000u);
+}
+
 // A producer that tries to push every cycle into a 2-deep, 1-cycle FIFO whose
 // consumer pops only in cycles 2, 5, 8, 11. Worked by hand: pushes in cycles
 // 0, 1, 2, 5, 8, 11 (items 0..5); stalls in 3, 4, 6, 7, 9, 10; pops items 0..3.
