@@ -22,6 +22,7 @@ RpRob::RpRob(const RpRobConfig& config) : config_(config) {
   if (config.recent_tags < 0)
     fail("RP-ROB recent-tags recorder size must not be negative (got {})", config.recent_tags);
   entries_.resize(size_t(config.entries));
+  queues_.resize(size_t(config.entries));
 }
 
 void RpRob::note_recent(uint32_t tag) {
@@ -65,7 +66,8 @@ bool RpRob::insert_scan(uint32_t rp, uint32_t tag) {
   Entry& en = entries_[size_t(chosen)];
   if (en.count == 0) en.tag = tag;
   ++en.count;
-  en.ready.push_back({rp, tag, stamp_++});
+  queues_[size_t(chosen)].push_back({rp, tag, stamp_++});
+  ++en.ready;
   if (rp >= where_.size()) where_.resize(size_t(rp) + 1);
   where_[rp] = {chosen, tag, false, true};
   ++held_;
@@ -80,8 +82,10 @@ bool RpRob::insert_scan(uint32_t rp, uint32_t tag) {
 ScheduledRp RpRob::pop(int e) {
   ++version_;
   Entry& en = entries_[size_t(e)];
-  Ready r = en.ready.front();
-  en.ready.pop_front();
+  std::deque<Ready>& q = queues_[size_t(e)];
+  Ready r = q.front();
+  q.pop_front();
+  --en.ready;
   where_[r.rp].in_flight = true;
   ++counters_.schedules;
   if (!has_last_scheduled_ || last_scheduled_ != r.tag) ++counters_.tag_runs;
@@ -90,19 +94,12 @@ ScheduledRp RpRob::pop(int e) {
   return {r.rp, r.tag, e};
 }
 
-std::optional<ScheduledRp> RpRob::schedule() {
-  if (nothing_version_ == version_) return std::nullopt;  // nothing changed since the last empty answer
-  const std::optional<ScheduledRp> s = schedule_scan();
-  if (!s) nothing_version_ = version_;
-  return s;
-}
-
 std::optional<ScheduledRp> RpRob::schedule_scan() {
   if (!config_.reorder) {
     int best = -1;
     for (int e = 0; e < entries(); ++e) {
       const Entry& en = entries_[size_t(e)];
-      if (!en.ready.empty() && (best < 0 || en.ready.front().stamp < entries_[size_t(best)].ready.front().stamp))
+      if (en.ready > 0 && (best < 0 || queues_[size_t(e)].front().stamp < queues_[size_t(best)].front().stamp))
         best = e;
     }
     if (best < 0) return std::nullopt;
@@ -119,7 +116,7 @@ std::optional<ScheduledRp> RpRob::schedule_scan() {
       const Entry& en = entries_[size_t(e)];
       if (en.count == 0 || en.tag != current_) continue;
       any_placeholder = true;
-      if (!en.ready.empty() && (best < 0 || en.count < entries_[size_t(best)].count)) best = e;
+      if (en.ready > 0 && (best < 0 || en.count < entries_[size_t(best)].count)) best = e;
     }
     if (best >= 0) return pop(best);
     if (any_placeholder && !config_.switch_when_idle) return std::nullopt;  // wait until they come back or retire
@@ -128,9 +125,9 @@ std::optional<ScheduledRp> RpRob::schedule_scan() {
   int hit = -1, other = -1;
   for (int e = 0; e < entries(); ++e) {
     const Entry& en = entries_[size_t(e)];
-    if (en.ready.empty()) continue;
+    if (en.ready == 0) continue;
     if (config_.tag_switch == TagSwitchRule::Fullest) {
-      if (other < 0 || en.ready.size() > entries_[size_t(other)].ready.size()) other = e;
+      if (other < 0 || en.ready > entries_[size_t(other)].ready) other = e;
     } else if (in_recent(en.tag)) {
       if (hit < 0 || en.count < entries_[size_t(hit)].count) hit = e;
     } else if (other < 0 || en.count > entries_[size_t(other)].count) {
@@ -157,7 +154,8 @@ RpRob::Place& RpRob::in_flight_place(uint32_t rp, const char* op) {
 void RpRob::reschedule(uint32_t rp) {
   Place& p = in_flight_place(rp, "reschedule");
   p.in_flight = false;
-  entries_[size_t(p.entry)].ready.push_back({rp, p.tag, stamp_++});
+  queues_[size_t(p.entry)].push_back({rp, p.tag, stamp_++});
+  ++entries_[size_t(p.entry)].ready;
   ++version_;
   ++counters_.reschedules;
 }

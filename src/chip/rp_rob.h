@@ -96,7 +96,12 @@ class RpRob {
     }
     return insert_scan(rp, tag);
   }
-  std::optional<ScheduledRp> schedule();
+  std::optional<ScheduledRp> schedule() {
+    if (nothing_version_ == version_) return std::nullopt;  // nothing changed since the last empty answer
+    const std::optional<ScheduledRp> s = schedule_scan();
+    if (!s) nothing_version_ = version_;
+    return s;
+  }
   void reschedule(uint32_t rp);  // throws std::logic_error unless rp is in flight
   void retire(uint32_t rp);      // throws std::logic_error unless rp is in flight
 
@@ -105,7 +110,7 @@ class RpRob {
   bool entry_labelled(int e) const { return entries_[size_t(e)].count > 0; }
   uint32_t entry_tag(int e) const { return entries_[size_t(e)].tag; }
   int entry_count(int e) const { return entries_[size_t(e)].count; }  // placeholders, ready + in flight
-  int entry_ready(int e) const { return int(entries_[size_t(e)].ready.size()); }
+  int entry_ready(int e) const { return entries_[size_t(e)].ready; }
   size_t placeholders() const { return held_; }
   bool empty() const { return held_ == 0; }
   std::optional<uint32_t> current_tag() const {
@@ -135,7 +140,7 @@ class RpRob {
   struct Entry {
     uint32_t tag = 0;
     int count = 0;
-    std::deque<Ready> ready;
+    int ready = 0;  // placeholders ready (in the entry's queue)
   };
   struct Place {
     int entry = 0;
@@ -152,7 +157,8 @@ class RpRob {
   Place& in_flight_place(uint32_t rp, const char* op);
 
   RpRobConfig config_;
-  std::vector<Entry> entries_;
+  std::vector<Entry> entries_;              // compact, for the scans
+  std::vector<std::deque<Ready>> queues_;  // each entry's ready placeholders, oldest first
   std::vector<Place> where_;  // by RP pointer
   size_t held_ = 0;           // RPs with a placeholder
   std::deque<uint32_t> recent_;
