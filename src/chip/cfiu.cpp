@@ -21,6 +21,22 @@ Cfiu::Cfiu(const SceneModel& model, const ChipNumerics& numerics, const FeatureC
   for (int c = 0; c < channels_; ++c)
     zero_point_sum_.push_back(int64_t(model.feature_quant.zero_point[size_t(c)]) *
                               (int64_t(1) << (3 * numerics.interp_fraction_bits)));
+  // The SIMD kernel's sums and their floor or half-up requantization stay in
+  // int32 when the sums are below 15 * 2^(3 fb) <= 15 * 2^27, the zero-point
+  // terms no larger, the half below 2^(3 fb - 1) and the clamp bounds fit:
+  // |sum - zero| + half < 15.5 * 2^27 < 2^31 (weighted_sum's first branch).
+  const int fb = numerics.interp_fraction_bits;
+  const int shift = 3 * fb - numerics.interp_feature_frac_bits;
+  const fx::Rounding mode = numerics.rounding;
+  const int64_t zero_bound = int64_t(15) << (3 * fb);
+  finish_in_int32_ = channels_ % 2 == 0 && channels_ <= 64 && 3 * fb <= 27 && shift >= 1 && shift <= 27 &&
+                     (mode == fx::Rounding::Floor || mode == fx::Rounding::HalfUp) &&
+                     numerics.interp_feature_bits >= 1 && numerics.interp_feature_bits <= 32;
+  for (int64_t z : zero_point_sum_) finish_in_int32_ = finish_in_int32_ && z >= -zero_bound && z <= zero_bound;
+  if (finish_in_int32_) {
+    finish_half_ = mode == fx::Rounding::HalfUp ? int32_t(1) << (shift - 1) : 0;
+    for (int c = 0; c < channels_; ++c) (c % 2 ? zero_odd_ : zero_even_).push_back(int32_t(zero_point_sum_[size_t(c)]));
+  }
 }
 
 void Cfiu::interpolate(uint32_t block, const SampleCoord& s, int32_t* out) {
@@ -78,6 +94,12 @@ void Cfiu::weighted_sum(uint32_t block, const SampleCoord& s, int32_t* out) cons
     for (size_t i = 0; i < 8; ++i) {
       byte_first[i] = first[i] >> 1;
       coef32[i] = int32_t(coef[i]);
+    }
+    if (finish_in_int32_) {
+      cfiu_corner_features(q4, byte_first.data(), coef32.data(), F / 2, zero_even_.data(), zero_odd_.data(),
+                           finish_half_, shift, int32_t(fx::min_signed(numerics_.interp_feature_bits)),
+                           int32_t(fx::max_signed(numerics_.interp_feature_bits)), out);
+      return;
     }
     std::array<int32_t, kKernelChannels / 2> even, odd;
     cfiu_corner_sums(q4, byte_first.data(), coef32.data(), F / 2, even.data(), odd.data());

@@ -67,6 +67,12 @@ class Cfiu {
   FeatureCache cache_;
   int channels_;
   std::vector<int64_t> zero_point_sum_;  // per channel: zero_point * 2^(3 interp_fraction_bits)
+  // The whole interpolation in the SIMD kernel (cfiu_corner_features), in
+  // int32 (see the constructor); the zero-point terms of the even and odd
+  // channels, and the rounding's half.
+  bool finish_in_int32_ = false;
+  std::vector<int32_t> zero_even_, zero_odd_;
+  int32_t finish_half_ = 0;
   CfiuCounters counters_;
 };
 

@@ -2,6 +2,8 @@
 // (hwy/foreach_target.h) and picked at run time (HWY_DYNAMIC_DISPATCH).
 #include "chip/cfiu_kernel.h"
 
+#include <algorithm>
+
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "chip/cfiu_kernel.cpp"
 #include <hwy/foreach_target.h>  // before highway.h
@@ -46,6 +48,31 @@ void CornerSums(const uint8_t* HWY_RESTRICT q4, const size_t* HWY_RESTRICT byte_
   }
 }
 
+void CornerFeatures(const uint8_t* HWY_RESTRICT q4, const size_t* HWY_RESTRICT byte_first,
+                    const int32_t* HWY_RESTRICT coef, size_t bytes, const int32_t* HWY_RESTRICT zero_even,
+                    const int32_t* HWY_RESTRICT zero_odd, int32_t half, int shift, int32_t lo, int32_t hi,
+                    int32_t* HWY_RESTRICT out) {
+  constexpr size_t kMaxBytes = 32;
+  HWY_ALIGN int32_t even[kMaxBytes], odd[kMaxBytes];
+  CornerSums(q4, byte_first, coef, bytes, even, odd);
+  const hn::CappedTag<int32_t, 8> d;
+  const size_t n = hn::Lanes(d);
+  const auto vhalf = hn::Set(d, half), vlo = hn::Set(d, lo), vhi = hn::Set(d, hi);
+  auto finish = [&](auto sum, auto zero) {
+    return hn::Min(hn::Max(hn::ShiftRightSame(hn::Add(hn::Sub(sum, zero), vhalf), shift), vlo), vhi);
+  };
+  size_t b = 0;
+  for (; b + n <= bytes; b += n) {
+    const auto e = finish(hn::Load(d, even + b), hn::LoadU(d, zero_even + b));
+    const auto o = finish(hn::Load(d, odd + b), hn::LoadU(d, zero_odd + b));
+    hn::StoreInterleaved2(e, o, d, out + 2 * b);
+  }
+  for (; b < bytes; ++b) {
+    out[2 * b] = std::min(std::max((even[b] - zero_even[b] + half) >> shift, lo), hi);
+    out[2 * b + 1] = std::min(std::max((odd[b] - zero_odd[b] + half) >> shift, lo), hi);
+  }
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace edrnr::chip
 HWY_AFTER_NAMESPACE();
@@ -54,10 +81,17 @@ HWY_AFTER_NAMESPACE();
 namespace edrnr::chip {
 
 HWY_EXPORT(CornerSums);
+HWY_EXPORT(CornerFeatures);
 
 void cfiu_corner_sums(const uint8_t* q4, const size_t* byte_first, const int32_t* coef, size_t bytes, int32_t* even,
                       int32_t* odd) {
   HWY_DYNAMIC_DISPATCH(CornerSums)(q4, byte_first, coef, bytes, even, odd);
+}
+
+void cfiu_corner_features(const uint8_t* q4, const size_t* byte_first, const int32_t* coef, size_t bytes,
+                          const int32_t* zero_even, const int32_t* zero_odd, int32_t half, int shift, int32_t lo,
+                          int32_t hi, int32_t* out) {
+  HWY_DYNAMIC_DISPATCH(CornerFeatures)(q4, byte_first, coef, bytes, zero_even, zero_odd, half, shift, lo, hi, out);
 }
 
 }  // namespace edrnr::chip
