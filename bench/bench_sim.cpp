@@ -12,11 +12,11 @@
 //   bench_sim --benchmark_filter='BM_Simulate/frame:0/|BM_Reference/frame:0'   # lego
 //   bench_sim --benchmark_filter='BM_Simulate/frame:[0-3]/threads:1|BM_Simulate/frame:0/threads:2|BM_Reference'
 //   bench_sim --benchmark_filter=MemorySystem
-// Last figures (wall s, idle machine, the bundled models of
-// configs/train/default.yaml; docs/simulator.md "Host speed"): lego one
-// thread 1.38-1.41 against the reference renderer's 1.04-1.11 in the same
-// runs (1.33x); mic one thread 1.05-1.08 against 0.86 (1.23x); two threads
-// 0.96-1.16 when the host leaves both cores to the machine.
+// Last figures (wall s, load average 0.6, three runs; docs/simulator.md
+// "Host speed"): lego one thread 1.39-1.48 against the reference renderer's
+// 1.13-1.18 in the same runs (1.20-1.31x), two threads 0.97-0.99 (1.5x one
+// thread; one run the host slowed took 1.72); mic one thread 1.01-1.10
+// against 0.96-1.04 (1.03-1.09x).
 // A frame whose model or dataset is missing is skipped with a message.
 #include <benchmark/benchmark.h>
 
