@@ -124,47 +124,24 @@ TEST(TmeRequantSigned, MatchesRequantizeOnEveryTarget) {
   hwy::SetSupportedTargetsForTest(0);
 }
 
-// cfiu_corner_sums against its contract's formula, with the largest
-// coefficients the CFIU uses (2^24 in all) and row lengths with and without a
-// partial vector, on every target.
-TEST(CfiuCornerSums, MatchesTheScalarSumsOnEveryTarget) {
-  std::mt19937_64 rng(5);
-  std::vector<uint8_t> q4(4096);
-  for (uint8_t& b : q4) b = uint8_t(rng());
-  for (int64_t target : hwy::SupportedAndGeneratedTargets()) {
-    hwy::SetSupportedTargetsForTest(target);
-    for (size_t bytes : {size_t(1), size_t(8), size_t(13), size_t(32)}) {
-      for (int rep = 0; rep < 50; ++rep) {
-        size_t first[8];
-        int32_t coef[8];
-        int32_t left = int32_t(1) << 24;
-        for (int c = 0; c < 8; ++c) {
-          first[c] = rng() % (q4.size() - bytes);
-          coef[c] = c == 7 ? left : int32_t(rng() % uint64_t(left + 1));
-          left -= coef[c];
-        }
-        std::vector<int32_t> even(bytes), odd(bytes);
-        cfiu_corner_sums(q4.data(), first, coef, bytes, even.data(), odd.data());
-        for (size_t b = 0; b < bytes; ++b) {
-          int64_t e = 0, o = 0;
-          for (int c = 0; c < 8; ++c) {
-            e += int64_t(coef[c]) * (q4[first[c] + b] & 15);
-            o += int64_t(coef[c]) * (q4[first[c] + b] >> 4);
-          }
-          ASSERT_EQ(even[b], e) << tme_kernel_target() << " byte " << b;
-          ASSERT_EQ(odd[b], o) << tme_kernel_target() << " byte " << b;
-        }
-      }
-    }
+// Eight corners' first bytes below `span` and coefficients summing to 2^24
+// (the largest the CFIU uses).
+void random_corners(std::mt19937_64& rng, size_t span, size_t* first, int32_t* coef) {
+  int32_t left = int32_t(1) << 24;
+  for (int c = 0; c < 8; ++c) {
+    first[c] = rng() % span;
+    coef[c] = c == 7 ? left : int32_t(rng() % uint64_t(left + 1));
+    left -= coef[c];
   }
-  hwy::SetSupportedTargetsForTest(0);
 }
 
-// cfiu_corner_features against its contract's formula, computed in int64 from
-// the scalar sums: zero-point terms up to 15 * 2^24 of either sign, floor
-// (half 0) and half-up rounding, clamp bounds that bite, on every target.
-TEST(CfiuCornerFeatures, MatchesTheScalarFormulaOnEveryTarget) {
-  std::mt19937_64 rng(6);
+// cfiu_corner_sums and cfiu_corner_features against their contracts'
+// formulas, with the largest coefficients the CFIU uses (2^24 in all), row
+// lengths with and without a partial vector, zero-point terms up to
+// 15 * 2^24 of either sign, floor (half 0) and half-up rounding and clamp
+// bounds that bite, on every target.
+TEST(CfiuKernels, MatchTheScalarFormulasOnEveryTarget) {
+  std::mt19937_64 rng(5);
   std::vector<uint8_t> q4(4096);
   for (uint8_t& b : q4) b = uint8_t(rng());
   const int64_t zero_bound = int64_t(15) << 24;
@@ -174,13 +151,8 @@ TEST(CfiuCornerFeatures, MatchesTheScalarFormulaOnEveryTarget) {
       for (int rep = 0; rep < 50; ++rep) {
         size_t first[8];
         int32_t coef[8];
-        int32_t left = int32_t(1) << 24;
-        for (int c = 0; c < 8; ++c) {
-          first[c] = rng() % (q4.size() - bytes);
-          coef[c] = c == 7 ? left : int32_t(rng() % uint64_t(left + 1));
-          left -= coef[c];
-        }
-        std::vector<int32_t> zero_even(bytes), zero_odd(bytes);
+        random_corners(rng, q4.size() - bytes, first, coef);
+        std::vector<int32_t> even(bytes), odd(bytes), zero_even(bytes), zero_odd(bytes), out(2 * bytes);
         for (size_t b = 0; b < bytes; ++b) {
           zero_even[b] = int32_t(int64_t(rng() % uint64_t(2 * zero_bound + 1)) - zero_bound);
           zero_odd[b] = int32_t(int64_t(rng() % uint64_t(2 * zero_bound + 1)) - zero_bound);
@@ -188,21 +160,23 @@ TEST(CfiuCornerFeatures, MatchesTheScalarFormulaOnEveryTarget) {
         const int shift = 1 + int(rng() % 24);
         const int32_t half = rep % 2 ? int32_t(1) << (shift - 1) : 0;
         const int32_t lo = -(int32_t(1) << 7), hi = (int32_t(1) << 7) - 1;
-        std::vector<int32_t> out(2 * bytes);
+        cfiu_corner_sums(q4.data(), first, coef, bytes, even.data(), odd.data());
         cfiu_corner_features(q4.data(), first, coef, bytes, zero_even.data(), zero_odd.data(), half, shift, lo, hi,
                              out.data());
+        // floor((x + half) / 2^shift), clamped
+        auto finish = [&](int64_t x) {
+          const int64_t v = x + half;
+          const int64_t q = v >= 0 ? v / (int64_t(1) << shift) : -((-v + (int64_t(1) << shift) - 1) >> shift);
+          return std::clamp<int64_t>(q, lo, hi);
+        };
         for (size_t b = 0; b < bytes; ++b) {
           int64_t e = 0, o = 0;
           for (int c = 0; c < 8; ++c) {
             e += int64_t(coef[c]) * (q4[first[c] + b] & 15);
             o += int64_t(coef[c]) * (q4[first[c] + b] >> 4);
           }
-          // floor((x + half) / 2^shift), clamped
-          auto finish = [&](int64_t x) {
-            const int64_t v = x + half;
-            const int64_t q = v >= 0 ? v / (int64_t(1) << shift) : -((-v + (int64_t(1) << shift) - 1) >> shift);
-            return std::clamp<int64_t>(q, lo, hi);
-          };
+          ASSERT_EQ(even[b], e) << tme_kernel_target() << " byte " << b;
+          ASSERT_EQ(odd[b], o) << tme_kernel_target() << " byte " << b;
           ASSERT_EQ(out[2 * b], finish(e - zero_even[b])) << tme_kernel_target() << " byte " << b;
           ASSERT_EQ(out[2 * b + 1], finish(o - zero_odd[b])) << tme_kernel_target() << " byte " << b;
         }
