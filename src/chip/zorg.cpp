@@ -1,8 +1,10 @@
 #include "chip/zorg.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
+#include "chip/zorg_kernel.h"
 #include "core/error.h"
 
 namespace edrnr::chip {
@@ -139,6 +141,8 @@ RayGenerator::RayGenerator(const Camera& camera, const Box3f& scene_box, int mic
   for (int x = 0; x < columns; ++x) column_terms_[size_t(x)] = column_term(x);
   for (int y = 0; y < rows; ++y) row_terms_[size_t(y)] = row_term(y);
   for (int i = 0; i < 3; ++i) z_term_[i] = rf_.mul(rot_[i][2], -1.0);
+  lane_rf_ = {rf_.drop_bits(), rf_.min_normal(), rf_.overflow_threshold()};
+  lane_tf_ = {tf_.drop_bits(), tf_.min_normal(), tf_.overflow_threshold()};
 }
 
 Vec3d RayGenerator::column_term(int x) const {
@@ -170,6 +174,36 @@ GeneratedRay RayGenerator::generate(int x, int y) const {
 
 std::array<GeneratedRay, kRaysPerPacket> RayGenerator::generate(const PixelQuad& quad) const {
   std::array<GeneratedRay, kRaysPerPacket> out{};
+  // The four rays in SIMD lanes (invalid rays repeat a valid one's pixel),
+  // unless a pixel is outside the image or a value leaves the formats'
+  // normal range: then one ray at a time (the same values).
+  static_assert(kRaysPerPacket == 4, "zorg_directions computes four rays");
+  const int lead = quad.valid_mask ? std::countr_zero(unsigned(quad.valid_mask)) : -1;
+  bool lanes = lead >= 0;
+  alignas(32) double col[3][4], row[3][4], world[3][4], dir[3][4];
+  for (int r = 0; r < kRaysPerPacket && lanes; ++r) {
+    const int src = quad.valid_mask >> r & 1 ? r : lead;
+    const size_t x = quad.x[size_t(src)], y = quad.y[size_t(src)];
+    lanes = x < column_terms_.size() && y < row_terms_.size();
+    if (!lanes) break;
+    for (int a = 0; a < 3; ++a) {
+      col[a][r] = column_terms_[x][a];
+      row[a][r] = row_terms_[y][a];
+    }
+  }
+  const double z[3] = {z_term_.x, z_term_.y, z_term_.z}, scale[3] = {dir_scale_.x, dir_scale_.y, dir_scale_.z};
+  if (lanes && zorg_directions(&col[0][0], &row[0][0], z, scale, lane_rf_, lane_tf_, &world[0][0], &dir[0][0])) {
+    for (int r = 0; r < kRaysPerPacket; ++r) {
+      if (!(quad.valid_mask >> r & 1)) continue;
+      GeneratedRay& g = out[size_t(r)];
+      for (int a = 0; a < 3; ++a) {
+        g.world_dir[a] = world[a][r];
+        g.ray.dir[a] = dir[a][r];
+      }
+      g.ray.origin = origin_m_;
+    }
+    return out;
+  }
   for (int r = 0; r < kRaysPerPacket; ++r)
     if (quad.valid_mask >> r & 1) out[size_t(r)] = generate(quad.x[size_t(r)], quad.y[size_t(r)]);
   return out;

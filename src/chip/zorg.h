@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "chip/chip_ray.h"
+#include "chip/zorg_kernel.h"
 #include "core/custom_float.h"
 #include "data/camera.h"
 
@@ -128,6 +129,7 @@ class RayGenerator {
   // times d_cam.z = -1.
   std::vector<Vec3d> column_terms_, row_terms_;
   Vec3d z_term_;
+  LaneRounding lane_rf_, lane_tf_;  // the two formats for zorg_directions
 };
 
 }  // namespace edrnr::chip

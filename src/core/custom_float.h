@@ -70,6 +70,11 @@ class FloatFormat {
   int max_exponent() const { return bias(); }
   double max_finite() const { return max_finite_; }
   double min_normal() const { return min_normal_; }
+  // The least magnitude that rounds past max_finite(), and the binary64
+  // fraction bits below the format's (53 - p): with min_normal(), what
+  // rounding a normal value takes (round() on the bit pattern).
+  double overflow_threshold() const { return overflow_threshold_; }
+  int drop_bits() const { return drop_bits_; }
   // Smallest positive value: the smallest subnormal, or min_normal() without subnormals.
   double min_positive() const { return subnormals_ ? min_subnormal_ : min_normal_; }
   // Spacing of the format at 1: 2^(1-p).
