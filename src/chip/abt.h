@@ -19,7 +19,16 @@ class Abt {
   Abt(const Vec3d& box_lo, const Vec3d& box_hi, const FloatFormat& ray_float);
 
   // False only if no point of the ray at t >= 0 comes within one micro voxel of the box.
-  bool hits(const ChipRay& ray) const;
+  bool hits(const ChipRay& ray) const { return hits(ray, from(ray.origin)); }
+
+  // The slab test's terms that depend on the ray's origin only (the widened
+  // faces minus the origin, rounded), for rays that share it.
+  struct Origin {
+    Vec3d origin, lo_minus_o, hi_minus_o;
+  };
+  Origin from(const Vec3d& origin) const;
+  // hits(ray) for a ray whose origin is o.origin.
+  bool hits(const ChipRay& ray, const Origin& o) const;
 
   const Vec3d& lo() const { return lo_; }
   const Vec3d& hi() const { return hi_; }

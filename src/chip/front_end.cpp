@@ -41,7 +41,10 @@ FrontEnd::FrontEnd(const SceneModel& model, const Camera& camera, const ChipNume
       lo_(box_corner(model, use_aabb, false)),
       hi_(box_corner(model, use_aabb, true)),
       abt_(lo_, hi_, numerics.ray_float),
-      tsps_(math, lo_, hi_) {}
+      tsps_(math, lo_, hi_) {
+  // Every ray of the frame starts at the camera: the ABT's terms of it once.
+  abt_origin_ = abt_.from(gen_.origin());
+}
 
 RayPacket FrontEnd::build(const PixelQuad& quad, const Vru& vru) {
   const auto rays = gen_.generate(quad);
@@ -58,7 +61,7 @@ RayPacket FrontEnd::build(const PixelQuad& quad, const Vru& vru) {
     vru.start(s);
     if (first) p.travel_sign = travel_sign(s.ray.dir);
     first = false;
-    if (!abt_.hits(s.ray)) {
+    if (!(s.ray.origin == abt_origin_.origin ? abt_.hits(s.ray, abt_origin_) : abt_.hits(s.ray))) {
       ++counters_.rays_dropped_abt;
       continue;
     }

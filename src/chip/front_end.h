@@ -53,6 +53,7 @@ class FrontEnd {
   RayGenerator gen_;
   Vec3d lo_, hi_;
   Abt abt_;
+  Abt::Origin abt_origin_;  // the slab terms of the camera origin
   Tsps tsps_;
   FrontEndCounters counters_;
   bool encode_directions_ = true;

@@ -109,6 +109,8 @@ class RayGenerator {
                const FloatFormat& traversal_float);
 
   GeneratedRay generate(int x, int y) const;
+  // Every ray's origin: the camera's, in micro units and the traversal float.
+  const Vec3d& origin() const { return origin_m_; }
   // The rays of a packet (invalid rays are left default).
   std::array<GeneratedRay, kRaysPerPacket> generate(const PixelQuad& quad) const;
 
