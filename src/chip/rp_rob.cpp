@@ -61,10 +61,15 @@ bool RpRob::insert_scan(uint32_t rp, uint32_t tag) {
     refused_tag_ = tag;
     return false;
   }
-  ++version_;
+  // A new CRP of another tag leaves an answer "wait for the current tag's
+  // CCRPs" as it was (only the current tag's entries decide it).
+  if (!(waiting_ && nothing_version_ == version_ && tag != current_)) ++version_;
   ++capacity_version_;
   Entry& en = entries_[size_t(chosen)];
-  if (en.count == 0) en.tag = tag;
+  if (en.count == 0) {
+    en.tag = tag;
+    ++entries_used_;
+  }
   ++en.count;
   queues_[size_t(chosen)].push_back({rp, tag, stamp_++});
   ++en.ready;
@@ -73,9 +78,7 @@ bool RpRob::insert_scan(uint32_t rp, uint32_t tag) {
   ++held_;
   note_recent(tag);
   ++counters_.inserts;
-  uint64_t used = 0;
-  for (const Entry& x : entries_) used += x.count > 0;
-  counters_.peak_entries_used = std::max(counters_.peak_entries_used, used);
+  counters_.peak_entries_used = std::max(counters_.peak_entries_used, entries_used_);
   return true;
 }
 
@@ -95,6 +98,7 @@ ScheduledRp RpRob::pop(int e) {
 }
 
 std::optional<ScheduledRp> RpRob::schedule_scan() {
+  waiting_ = false;
   if (!config_.reorder) {
     int best = -1;
     for (int e = 0; e < entries(); ++e) {
@@ -119,7 +123,10 @@ std::optional<ScheduledRp> RpRob::schedule_scan() {
       if (en.ready > 0 && (best < 0 || en.count < entries_[size_t(best)].count)) best = e;
     }
     if (best >= 0) return pop(best);
-    if (any_placeholder && !config_.switch_when_idle) return std::nullopt;  // wait until they come back or retire
+    if (any_placeholder && !config_.switch_when_idle) {
+      waiting_ = true;
+      return std::nullopt;  // wait until they come back or retire
+    }
   }
   // Tag switch.
   int hit = -1, other = -1;
@@ -163,7 +170,7 @@ void RpRob::reschedule(uint32_t rp) {
 void RpRob::retire(uint32_t rp) {
   Place& p = in_flight_place(rp, "retire");
   Entry& en = entries_[size_t(p.entry)];
-  --en.count;
+  if (--en.count == 0) --entries_used_;
   p = Place{};
   --held_;
   ++version_;

@@ -157,10 +157,11 @@ class RpRob {
   Place& in_flight_place(uint32_t rp, const char* op);
 
   RpRobConfig config_;
-  std::vector<Entry> entries_;              // compact, for the scans
+  std::vector<Entry> entries_;             // compact, for the scans
   std::vector<std::deque<Ready>> queues_;  // each entry's ready placeholders, oldest first
-  std::vector<Place> where_;  // by RP pointer
-  size_t held_ = 0;           // RPs with a placeholder
+  std::vector<Place> where_;               // by RP pointer
+  size_t held_ = 0;                        // RPs with a placeholder
+  uint64_t entries_used_ = 0;              // entries holding a placeholder (count > 0)
   std::deque<uint32_t> recent_;
   bool has_current_ = false;
   uint32_t current_ = 0;
@@ -176,6 +177,7 @@ class RpRob {
   uint64_t refused_version_ = ~uint64_t(0);  // insert(refused_rp_, refused_tag_) was refused at this capacity_version_
   uint32_t refused_rp_ = 0, refused_tag_ = 0;
   uint64_t nothing_version_ = ~uint64_t(0);  // schedule() had nothing to give then
+  bool waiting_ = false;                     // the last scan gave nothing while the current tag's CCRPs were in flight
   bool has_last_scheduled_ = false;
   uint32_t last_scheduled_ = 0;
   uint64_t stamp_ = 0;
