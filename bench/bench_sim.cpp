@@ -12,11 +12,10 @@
 //   bench_sim --benchmark_filter='BM_Simulate/frame:0/|BM_Reference/frame:0'   # lego
 //   bench_sim --benchmark_filter='BM_Simulate/frame:[0-3]/threads:1|BM_Simulate/frame:0/threads:2|BM_Reference'
 //   bench_sim --benchmark_filter=MemorySystem
-// Last figures (wall s, load average 0.6, three runs; docs/simulator.md
-// "Host speed"): lego one thread 1.39-1.48 against the reference renderer's
-// 1.13-1.18 in the same runs (1.20-1.31x), two threads 0.97-0.99 (1.5x one
-// thread; one run the host slowed took 1.72); mic one thread 1.01-1.10
-// against 0.96-1.04 (1.03-1.09x).
+// Last figures (wall s, load average 1.0, three runs; docs/simulator.md
+// "Host speed"): lego one thread 1.25-1.26 against the reference renderer's
+// 1.10-1.20 in the same runs (1.04-1.14x), two threads 0.90-0.95 (1.32-1.39x
+// one thread); mic one thread 0.93-0.95 against 0.93-0.95 (0.99-1.01x).
 // A frame whose model or dataset is missing is skipped with a message.
 #include <benchmark/benchmark.h>
 
