@@ -381,8 +381,8 @@ GeneratedRay reference_ray(const Camera& cam, const Box3f& box, int micro_res, c
   return g;
 }
 
-TEST(TraversalSpeed, RayGenerationMatchesThePerPixelFormula) {
-  const ChipNumerics n;
+// A 37x23 camera rotated about an oblique axis, its origin outside the box.
+Camera oblique_camera() {
   Camera cam;
   cam.width = 37;
   cam.height = 23;
@@ -390,9 +390,14 @@ TEST(TraversalSpeed, RayGenerationMatchesThePerPixelFormula) {
   cam.fy = 40.9;
   cam.cx = 18.2;
   cam.cy = 11.7;
-  // A rotation about an oblique axis and an origin outside the box.
   const double c = std::cos(0.7), s = std::sin(0.7);
   cam.c2w = {c, 0, s, 2.1, s * s, c, -s * c, -1.3, -s * c, s, c * c, 3.7, 0, 0, 0, 1};
+  return cam;
+}
+
+TEST(TraversalSpeed, RayGenerationMatchesThePerPixelFormula) {
+  const ChipNumerics n;
+  const Camera cam = oblique_camera();
   const Box3f box{{-1.5f, -1.f, -1.25f}, {1.5f, 1.f, 1.25f}};
   const RayGenerator gen(cam, box, 128, n.ray_float, n.traversal_float);
   int rays = 0;
@@ -420,15 +425,7 @@ TEST(TraversalSpeed, RayGenerationMatchesThePerPixelFormula) {
 TEST(TraversalSpeed, PacketRaysMatchThePerPixelFormulaOnEveryTarget) {
   const ChipNumerics n;
   const Box3f box{{-1.5f, -1.f, -1.25f}, {1.5f, 1.f, 1.25f}};
-  Camera oblique;
-  oblique.width = 37;
-  oblique.height = 23;
-  oblique.fx = 41.3;
-  oblique.fy = 40.9;
-  oblique.cx = 18.2;
-  oblique.cy = 11.7;
-  const double c = std::cos(0.7), s = std::sin(0.7);
-  oblique.c2w = {c, 0, s, 2.1, s * s, c, -s * c, -1.3, -s * c, s, c * c, 3.7, 0, 0, 0, 1};
+  const Camera oblique = oblique_camera();
   Camera straight = oblique;
   straight.cx = 10.5;  // pixel 10's centre: d_cam.x = 0
   straight.cy = 7.5;
