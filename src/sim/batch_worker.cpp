@@ -215,6 +215,21 @@ void FtuAhead::run_slot(Slot& s, uint32_t rp, Ftu& ftu) {
   s.state.store(kDone, std::memory_order_release);
 }
 
+bool FtuAhead::run_any_pending(Ftu& ftu) {
+  const uint32_t n = uint32_t(buffer_.capacity());
+  for (uint32_t i = 0; i < n; ++i) {
+    const uint32_t rp = (steal_from_ + i) % n;
+    Slot& s = slots_[rp];
+    if (s.state.load(std::memory_order_relaxed) != kPending) continue;
+    uint8_t expected = kPending;
+    if (!s.state.compare_exchange_strong(expected, kRunning)) continue;
+    run_slot(s, rp, ftu);
+    steal_from_ = rp + 1;
+    return true;
+  }
+  return false;
+}
+
 void FtuAhead::try_run(uint32_t rp) {
   Slot& s = slots_[rp];
   uint8_t expected = kPending;
@@ -303,7 +318,10 @@ void Worker::rethrow_failure() const {
   if (failed_.load(std::memory_order_acquire)) std::rethrow_exception(error_);
 }
 
-void Worker::wait(uint64_t seq) {
+void Worker::wait(uint64_t seq, Ftu* ftu) {
+  if (ftu && ftu_ahead_)
+    while (completed_.load() <= seq && ftu_ahead_->run_any_pending(*ftu)) {
+    }
   main_wait(completed_, seq);
   rethrow_failure();
 }

@@ -173,6 +173,9 @@ class FtuAhead {
   // Engine: rp's run in cv_tag, made now with `ftu` if nobody started it,
   // else waited for. Rethrows what the run threw. Valid until pend(rp).
   FtuRun& take(uint32_t rp, uint32_t cv_tag, chip::Ftu& ftu);
+  // Engine, while it waits: makes one pending run nobody started with `ftu`
+  // (take() then finds it made); false when there is none.
+  bool run_any_pending(chip::Ftu& ftu);
 
  private:
   enum : uint8_t { kNone, kPending, kRunning, kDone };
@@ -187,6 +190,7 @@ class FtuAhead {
 
   chip::RpBuffer& buffer_;
   chip::Ftu ftu_;                  // the worker's
+  uint32_t steal_from_ = 0;        // run_any_pending's next RP to look at
   std::unique_ptr<Slot[]> slots_;  // by RP pointer
 };
 
@@ -209,8 +213,9 @@ class Worker {
   // Queues a job for rp's pending FTU run (FtuAhead::pend, needs_job first).
   void submit_ftu(uint32_t rp);
   // Waits until job `seq` is done (its results are then visible). Rethrows
-  // an exception a job threw.
-  void wait(uint64_t seq);
+  // an exception a job threw. With `ftu` (the engine's), pending FTU runs
+  // are made with it meanwhile, as long as the job is not done.
+  void wait(uint64_t seq, chip::Ftu* ftu = nullptr);
   // The next front-end packet, waiting for it if need be.
   FrontEndPacket take_packet();
 

@@ -521,7 +521,7 @@ inline void Engine::step_vru() {
 inline void Engine::complete_batch(uint32_t rp) {
   Flight& f = flights_[rp];
   if (worker_)
-    worker_->wait(f.job);
+    worker_->wait(f.job, &ftu_);
   else if (f.deferred)
     arithmetic_.flush();
   if (f.stay) {
