@@ -61,7 +61,7 @@ RayPacket FrontEnd::build(const PixelQuad& quad, const Vru& vru) {
     vru.start(s);
     if (first) p.travel_sign = travel_sign(s.ray.dir);
     first = false;
-    if (!(s.ray.origin == abt_origin_.origin ? abt_.hits(s.ray, abt_origin_) : abt_.hits(s.ray))) {
+    if (!abt_.hits(s.ray, abt_origin_)) {  // every generated ray starts at gen_.origin()
       ++counters_.rays_dropped_abt;
       continue;
     }

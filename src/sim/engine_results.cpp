@@ -156,8 +156,10 @@ void Engine::finish_result() {
           "cycles waiting for data from memory (or a feature cache MSHR entry)", "cycles with nothing to do"};
       cnt(name, "cycles", what[st], activity_.cycles(u, UnitState(st)));
     }
-  for (auto* q : {&fe_out_, &retire_q_}) q->account_until(cycles_);
-  for (auto* q : {&tme_in_, &vru_in_}) q->account_until(cycles_);
+  fe_out_.account_until(cycles_);  // the cycles since each FIFO last changed
+  retire_q_.account_until(cycles_);
+  tme_in_.account_until(cycles_);
+  vru_in_.account_until(cycles_);
   fe_out_.export_stats(r, "sim.fifo.front_end_to_ctu");
   retire_q_.export_stats(r, "sim.fifo.retire_to_ctu");
   tme_in_.export_stats(r, "sim.fifo.cfiu_to_tme");
