@@ -196,52 +196,95 @@ uint64_t exit_search_steps(int64_t lo, int64_t hi, int64_t g, int64_t e) {
 }
 }  // namespace
 
-int64_t RayMath::cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& c, int cell_micro, uint64_t* evals,
-                           ExitMemo& memo, int64_t k_limit) const {
-  if (thresholds_.empty()) return cell_exit_rounded(r, k0, k_end, c, cell_micro, evals);
+// The crossing of `face` on axis a, made kept[0] (the previous kept[0]
+// becomes kept[1]; a face in kept[1] is swapped in without a search).
+const RayMath::FaceCrossing& RayMath::crossing(const ChipRay& r, int a, int face, int64_t lo, int64_t k_limit,
+                                               std::array<FaceCrossing, 2>& kept) const {
+  if (kept[1].face == face) {
+    std::swap(kept[0], kept[1]);
+    return kept[0];
+  }
+  kept[1] = kept[0];
+  FaceCrossing& x = kept[0];
+  const double d = r.dir[a], o = r.origin[a];
+  x.face = face;
+  x.guess = guess_index((double(face) - o) / (d * step_) - 0.5);
+  const Threshold th = thresholds_[size_t(face)];
+  if (d > 0)
+    x.first = first_true_from(lo, k_limit, x.guess, [&](int64_t k) {
+      const double prod = d * t_of(k);
+      return sum_at_least(prod, o, prod + o, th);
+    });
+  else
+    x.first = first_true_from(lo, k_limit, x.guess, [&](int64_t k) {
+      const double prod = d * t_of(k);
+      return !sum_at_least(prod, o, prod + o, th);
+    });
+  return x;
+}
+
+template <int kShift>
+int64_t RayMath::cell_exit_memo(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& c, uint64_t* evals,
+                                ExitMemo& memo, int64_t k_limit) const {
+  if (thresholds_.empty()) return cell_exit_rounded(r, k0, k_end, c, 1 << kShift, evals);
   // The point of k0 is in the cell, so along an axis the candidates after k0
   // are outside exactly when they are past the far face (the coordinate is
   // monotone): the first of them depends on the ray and that face only, and
   // is found once over [k0 + 1, k_limit). The search of cell_exit over
   // [lo, hi) then answers min(first, hi), and its evaluations follow from
-  // that answer and its guess.
+  // that answer and its guess. With no candidate after k0 before k_end there
+  // is nothing to search on any axis.
+  const int64_t lo = k0 + 1;
   int64_t best = k_end;
   uint64_t n = 0;
-  for (int a = 0; a < 3; ++a) {
+  for (int a = 0; a < 3 && lo < best; ++a) {
     const double d = r.dir[a];
-    if (d == 0.0) continue;  // the coordinate never changes
-    const int face = d > 0 ? (c[a] + 1) * cell_micro : c[a] * cell_micro;
-    if ((d > 0 && face >= micro_res_) || (d < 0 && face <= 0)) continue;  // the last cell: only the box ends it
-    const int64_t lo = k0 + 1, hi = best;                                 // only an exit before `best` matters
-    if (lo >= hi) break;
-    std::array<FaceCrossing, 2>& kept = memo.axis[size_t(a)];
-    if (kept[0].face != face) {
-      if (kept[1].face == face) {
-        std::swap(kept[0], kept[1]);
-      } else {
-        kept[1] = kept[0];
-        FaceCrossing& x = kept[0];
-        x.face = face;
-        x.guess = guess_index((double(face) - r.origin[a]) / (d * step_) - 0.5);
-        const double o = r.origin[a];
-        const Threshold th = thresholds_[size_t(face)];
-        if (d > 0)
-          x.first = first_true_from(lo, k_limit, x.guess, [&](int64_t k) {
-            const double prod = d * t_of(k);
-            return sum_at_least(prod, o, prod + o, th);
-          });
-        else
-          x.first = first_true_from(lo, k_limit, x.guess, [&](int64_t k) {
-            const double prod = d * t_of(k);
-            return !sum_at_least(prod, o, prod + o, th);
-          });
-      }
+    int face;
+    if (d > 0) {
+      face = (c[a] + 1) << kShift;
+      if (face >= micro_res_) continue;  // the last cell: only the box ends it
+    } else if (d < 0) {
+      face = c[a] << kShift;
+      if (face <= 0) continue;
+    } else {
+      continue;  // the coordinate never changes
     }
-    const FaceCrossing& x = kept[0];
+    std::array<FaceCrossing, 2>& kept = memo.axis[size_t(a)];
+    const FaceCrossing& x = kept[0].face == face ? kept[0] : crossing(r, a, face, lo, k_limit, kept);
+    const int64_t hi = best;  // only an exit before `best` matters
     const int64_t g = x.guess != kNoGuess ? std::clamp(x.guess, lo, hi - 1) : hi - 1;
     const int64_t e = std::min(x.first, hi);
     n += exit_search_steps(lo, hi, g, e);
     best = e;  // e <= hi == best
+  }
+  if (evals) *evals += n;
+  return best;
+}
+
+template int64_t RayMath::cell_exit_memo<1>(const ChipRay&, int64_t, int64_t, const Vec3i&, uint64_t*, ExitMemo&,
+                                            int64_t) const;
+template int64_t RayMath::cell_exit_memo<2>(const ChipRay&, int64_t, int64_t, const Vec3i&, uint64_t*, ExitMemo&,
+                                            int64_t) const;
+
+int64_t RayMath::cell_exit_any(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& c, int cell_micro,
+                               uint64_t* evals, ExitMemo& memo, int64_t k_limit) const {
+  if (thresholds_.empty()) return cell_exit_rounded(r, k0, k_end, c, cell_micro, evals);
+  // The search of cell_exit_memo with the face computed by a product.
+  const int64_t lo = k0 + 1;
+  int64_t best = k_end;
+  uint64_t n = 0;
+  for (int a = 0; a < 3 && lo < best; ++a) {
+    const double d = r.dir[a];
+    if (d == 0.0) continue;
+    const int face = d > 0 ? (c[a] + 1) * cell_micro : c[a] * cell_micro;
+    if ((d > 0 && face >= micro_res_) || (d < 0 && face <= 0)) continue;
+    std::array<FaceCrossing, 2>& kept = memo.axis[size_t(a)];
+    const FaceCrossing& x = kept[0].face == face ? kept[0] : crossing(r, a, face, lo, k_limit, kept);
+    const int64_t hi = best;
+    const int64_t g = x.guess != kNoGuess ? std::clamp(x.guess, lo, hi - 1) : hi - 1;
+    const int64_t e = std::min(x.first, hi);
+    n += exit_search_steps(lo, hi, g, e);
+    best = e;
   }
   if (evals) *evals += n;
   return best;

@@ -1,5 +1,7 @@
 #include "chip/ftu.h"
 
+#include <bit>
+
 #include "chip/ctu.h"
 #include "chip/lfau.h"
 #include "core/error.h"
@@ -92,11 +94,38 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
       fv[size_t(r)] = f;
     }
     if (!active) return false;
-    const LfauSelection sel = lfau_select(fv, active, rp.travel_sign, lag_first_);
-    ++counters_.iterations;
-    counters_.rays_advanced += uint64_t(sel.selected_rays());
-    ++counters_.fine_checks;
-    const uint32_t fine_index = uint32_t(fine.index(sel.voxel.x, sel.voxel.y, sel.voxel.z));
+    LfauSelection sel;
+    uint32_t fine_index;
+    if ((active & (active - 1)) == 0) {
+      // One ray in the CV: the LFAU selects it (both orders). It walks the
+      // empty fine voxels alone; no other ray's voxel changes meanwhile.
+      const int r = std::countr_zero(unsigned(active));
+      RayState& ray = rp.rays[size_t(r)];
+      Vec3i f = fv[size_t(r)];
+      for (;;) {
+        ++counters_.iterations;
+        ++counters_.rays_advanced;
+        ++counters_.fine_checks;
+        fine_index = uint32_t(fine.index(f.x, f.y, f.z));
+        if (fine.get(fine_index)) break;
+        ray.k = math_.cell_exit(ray.ray, ray.k, ray.k_end, f, kMicroPerFine, &counters_.position_evals, ray.exit_memo,
+                                ray.k_end);
+        if (!ray.live()) return false;
+        f = math_.cell_at(ray.ray, ray.k, kMicroPerFine);
+        known_f[size_t(r)] = f;
+        known_k[size_t(r)] = ray.k;
+        const Vec3i c = coarse_of(f);
+        if (linear_index(c.x, c.y, c.z, cr) != cv_tag) return false;
+      }
+      sel.selected_mask = uint8_t(active);
+      sel.voxel = f;
+    } else {
+      sel = lfau_select(fv, active, rp.travel_sign, lag_first_);
+      ++counters_.iterations;
+      counters_.rays_advanced += uint64_t(sel.selected_rays());
+      ++counters_.fine_checks;
+      fine_index = uint32_t(fine.index(sel.voxel.x, sel.voxel.y, sel.voxel.z));
+    }
     if (!fine.get(fine_index)) {
       for (int r = 0; r < kRaysPerPacket; ++r) {
         if (!(sel.selected_mask >> r & 1)) continue;

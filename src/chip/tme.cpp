@@ -162,11 +162,11 @@ TmeMlp compile_tme_mlp(const SceneModel& model, size_t index, const ChipNumerics
 }
 
 std::vector<int32_t> Tme::encode_direction(const Vec3d& dir, int frequencies, const ChipNumerics& n) {
-  std::vector<int32_t> out;
-  auto put = [&](double v) {
-    out.push_back(int32_t(fx::to_fixed(v, n.direction_code_frac_bits, n.direction_code_bits, n.rounding)));
-  };
-  out.reserve(3 + 6 * size_t(std::max(frequencies, 0)));
+  std::vector<int32_t> out(3 + 6 * size_t(std::max(frequencies, 0)));
+  int32_t* code = out.data();
+  const int frac_bits = n.direction_code_frac_bits, bits = n.direction_code_bits;
+  const fx::Rounding mode = n.rounding;
+  auto put = [&](double v) { *code++ = int32_t(fx::to_fixed(v, frac_bits, bits, mode)); };
   for (int a = 0; a < 3; ++a) put(dir[a]);
   // The sines and cosines of every frequency at once (det_sin_cos: the bits of
   // det_sin / det_cos), on the stack for up to 16 frequencies.
@@ -225,14 +225,35 @@ void Tme::select(int32_t index) {
   current_ = index;
 }
 
+namespace {
+template <fx::Rounding M>
+uint64_t requantize_codes(const int32_t* code, size_t n, const fx::Requant& q, int bits, int32_t* out) {
+  uint64_t saturations = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const int64_t r = fx::requantize<M>(code[i], q);
+    const int64_t v = fx::saturate(r, bits);
+    saturations += v != r;
+    out[i] = int32_t(v);
+  }
+  return saturations;
+}
+}  // namespace
+
 void Tme::direction_input(const std::vector<int32_t>& dir_code, TmeDirection& out) const {
   out.x.resize(dir_code.size());
-  out.saturations = 0;
-  for (size_t i = 0; i < dir_code.size(); ++i) {
-    const int64_t r = fx::requantize(dir_code[i], dir_code_, n_.rounding);
-    const int64_t v = fx::saturate(r, n_.activation_bits);
-    out.saturations += v != r;
-    out.x[i] = int32_t(v);
+  const int32_t* c = dir_code.data();
+  const size_t n = dir_code.size();
+  const int bits = n_.activation_bits;
+  switch (n_.rounding) {
+    case fx::Rounding::Floor:
+      out.saturations = requantize_codes<fx::Rounding::Floor>(c, n, dir_code_, bits, out.x.data());
+      return;
+    case fx::Rounding::HalfUp:
+      out.saturations = requantize_codes<fx::Rounding::HalfUp>(c, n, dir_code_, bits, out.x.data());
+      return;
+    case fx::Rounding::HalfEven:
+      out.saturations = requantize_codes<fx::Rounding::HalfEven>(c, n, dir_code_, bits, out.x.data());
+      return;
   }
 }
 
