@@ -36,11 +36,24 @@ Ftu::Ftu(const SceneModel& model, const RayMath& math, bool lag_first, size_t mi
     : model_(model), math_(math), lag_first_(lag_first), micro_grid_cache_(micro_grid_cache_words) {
   const Bitmap3& fine = model.occupancy[int(Tier::Fine)];
   if (model.fine_to_block.size() != fine.size()) fail("model lookups are missing (call finalize())");
-  for (size_t f = 0; f < fine.size(); ++f)
-    if (fine.get(f) && model.fine_to_block[f] < 0) fail("model: occupied fine voxel {} has no feature block", f);
+  // Every occupied fine voxel has a block; the micro-grid word of each
+  // block's fine voxel is gathered once.
+  block_words_.assign(model.block_count(), 0);
+  for (size_t f = 0; f < fine.size(); ++f) {
+    const int32_t b = model.fine_to_block[f];
+    if (b >= 0)
+      block_words_[size_t(b)] = gather_micro_word(uint32_t(f));
+    else if (fine.get(f))
+      fail("model: occupied fine voxel {} has no feature block", f);
+  }
 }
 
 uint64_t Ftu::micro_word(uint32_t fine_index) const {
+  const int32_t b = model_.fine_to_block[fine_index];
+  return b >= 0 ? block_words_[size_t(b)] : gather_micro_word(fine_index);
+}
+
+uint64_t Ftu::gather_micro_word(uint32_t fine_index) const {
   // Each row of 4 micro voxels along x is 4 aligned bits of the micro bitmap
   // (4 * fine x is a multiple of 4, and so is the resolution).
   const Bitmap3& micro = model_.occupancy[int(Tier::Micro)];

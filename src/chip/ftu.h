@@ -105,8 +105,12 @@ class Ftu {
   const FtuCounters& counters() const { return counters_; }
 
  private:
+  // micro_word from the micro bitmap, row by row.
+  uint64_t gather_micro_word(uint32_t fine_index) const;
+
   const SceneModel& model_;
   const RayMath& math_;
+  std::vector<uint64_t> block_words_;  // micro_word of each block's fine voxel
   bool lag_first_;
   LruTags micro_grid_cache_;
   std::vector<uint32_t>* micro_read_log_ = nullptr;
