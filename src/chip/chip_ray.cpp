@@ -224,9 +224,17 @@ const RayMath::FaceCrossing& RayMath::crossing(const ChipRay& r, int a, int face
 }
 
 template <int kShift>
-int64_t RayMath::cell_exit_memo(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& c, uint64_t* evals,
-                                ExitMemo& memo, int64_t k_limit) const {
-  if (thresholds_.empty()) return cell_exit_rounded(r, k0, k_end, c, 1 << kShift, evals);
+int64_t RayMath::cell_exit_memo(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& c, int cell_micro,
+                                uint64_t* evals, ExitMemo& memo, int64_t k_limit) const {
+  if (thresholds_.empty()) return cell_exit_rounded(r, k0, k_end, c, cell_micro, evals);
+  // A cell's low face, in micro units: a shift for cells of 2^kShift micro
+  // voxels, a product for the other sizes (kShift < 0).
+  auto low_face = [cell_micro](int cell) {
+    if constexpr (kShift >= 0)
+      return cell << kShift;
+    else
+      return cell * cell_micro;
+  };
   // The point of k0 is in the cell, so along an axis the candidates after k0
   // are outside exactly when they are past the far face (the coordinate is
   // monotone): the first of them depends on the ray and that face only, and
@@ -241,10 +249,10 @@ int64_t RayMath::cell_exit_memo(const ChipRay& r, int64_t k0, int64_t k_end, con
     const double d = r.dir[a];
     int face;
     if (d > 0) {
-      face = (c[a] + 1) << kShift;
+      face = low_face(c[a] + 1);
       if (face >= micro_res_) continue;  // the last cell: only the box ends it
     } else if (d < 0) {
-      face = c[a] << kShift;
+      face = low_face(c[a]);
       if (face <= 0) continue;
     } else {
       continue;  // the coordinate never changes
@@ -261,34 +269,12 @@ int64_t RayMath::cell_exit_memo(const ChipRay& r, int64_t k0, int64_t k_end, con
   return best;
 }
 
-template int64_t RayMath::cell_exit_memo<1>(const ChipRay&, int64_t, int64_t, const Vec3i&, uint64_t*, ExitMemo&,
+template int64_t RayMath::cell_exit_memo<-1>(const ChipRay&, int64_t, int64_t, const Vec3i&, int, uint64_t*, ExitMemo&,
+                                             int64_t) const;
+template int64_t RayMath::cell_exit_memo<1>(const ChipRay&, int64_t, int64_t, const Vec3i&, int, uint64_t*, ExitMemo&,
                                             int64_t) const;
-template int64_t RayMath::cell_exit_memo<2>(const ChipRay&, int64_t, int64_t, const Vec3i&, uint64_t*, ExitMemo&,
+template int64_t RayMath::cell_exit_memo<2>(const ChipRay&, int64_t, int64_t, const Vec3i&, int, uint64_t*, ExitMemo&,
                                             int64_t) const;
-
-int64_t RayMath::cell_exit_any(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& c, int cell_micro,
-                               uint64_t* evals, ExitMemo& memo, int64_t k_limit) const {
-  if (thresholds_.empty()) return cell_exit_rounded(r, k0, k_end, c, cell_micro, evals);
-  // The search of cell_exit_memo with the face computed by a product.
-  const int64_t lo = k0 + 1;
-  int64_t best = k_end;
-  uint64_t n = 0;
-  for (int a = 0; a < 3 && lo < best; ++a) {
-    const double d = r.dir[a];
-    if (d == 0.0) continue;
-    const int face = d > 0 ? (c[a] + 1) * cell_micro : c[a] * cell_micro;
-    if ((d > 0 && face >= micro_res_) || (d < 0 && face <= 0)) continue;
-    std::array<FaceCrossing, 2>& kept = memo.axis[size_t(a)];
-    const FaceCrossing& x = kept[0].face == face ? kept[0] : crossing(r, a, face, lo, k_limit, kept);
-    const int64_t hi = best;
-    const int64_t g = x.guess != kNoGuess ? std::clamp(x.guess, lo, hi - 1) : hi - 1;
-    const int64_t e = std::min(x.first, hi);
-    n += exit_search_steps(lo, hi, g, e);
-    best = e;
-  }
-  if (evals) *evals += n;
-  return best;
-}
 
 int64_t RayMath::cell_exit_rounded(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& c, int cell_micro,
                                    uint64_t* evals) const {

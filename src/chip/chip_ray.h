@@ -135,9 +135,9 @@ class RayMath {
   // count, with k_end <= k_limit and the crossings kept in `memo`.
   int64_t cell_exit(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& cell, int cell_micro, uint64_t* evals,
                     ExitMemo& memo, int64_t k_limit) const {
-    if (cell_micro == 4) return cell_exit_memo<2>(r, k0, k_end, cell, evals, memo, k_limit);
-    if (cell_micro == 2) return cell_exit_memo<1>(r, k0, k_end, cell, evals, memo, k_limit);
-    return cell_exit_any(r, k0, k_end, cell, cell_micro, evals, memo, k_limit);
+    if (cell_micro == 4) return cell_exit_memo<2>(r, k0, k_end, cell, 4, evals, memo, k_limit);
+    if (cell_micro == 2) return cell_exit_memo<1>(r, k0, k_end, cell, 2, evals, memo, k_limit);
+    return cell_exit_memo<-1>(r, k0, k_end, cell, cell_micro, evals, memo, k_limit);
   }
 
   // The run of candidates k >= 0 whose point lies in the closed box
@@ -188,13 +188,11 @@ class RayMath {
   // Fills thresholds_, or leaves it empty (then every test rounds) if the
   // format has no threshold of the expected kind for some f.
   void make_thresholds();
-  // The memo's cell exit for cells of 2^kShift micro voxels, and for cells
-  // of any size.
+  // The memo's cell exit for cells of cell_micro = 2^kShift micro voxels,
+  // or of any cell_micro with kShift < 0.
   template <int kShift>
-  int64_t cell_exit_memo(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& cell, uint64_t* evals,
-                         ExitMemo& memo, int64_t k_limit) const;
-  int64_t cell_exit_any(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& cell, int cell_micro, uint64_t* evals,
-                        ExitMemo& memo, int64_t k_limit) const;
+  int64_t cell_exit_memo(const ChipRay& r, int64_t k0, int64_t k_end, const Vec3i& cell, int cell_micro,
+                         uint64_t* evals, ExitMemo& memo, int64_t k_limit) const;
   // The crossing of `face` on axis a (searched over [lo, k_limit) unless
   // kept[1] holds it), made kept[0].
   const FaceCrossing& crossing(const ChipRay& r, int a, int face, int64_t lo, int64_t k_limit,

@@ -85,6 +85,10 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
       ray.exit_memo = {};
       ray.exit_memo_limit = ray.k_end;
     }
+  auto in_cv = [&](const Vec3i& f) {
+    const Vec3i c = coarse_of(f);
+    return linear_index(c.x, c.y, c.z, cr) == cv_tag;
+  };
   for (;;) {
     // The live rays inside the CV, and their fine voxels.
     uint8_t active = 0;
@@ -101,8 +105,7 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
       } else {
         f = known_f[size_t(r)];
       }
-      const Vec3i c = coarse_of(f);
-      if (linear_index(c.x, c.y, c.z, cr) != cv_tag) continue;
+      if (!in_cv(f)) continue;
       active |= uint8_t(1u << r);
       fv[size_t(r)] = f;
     }
@@ -127,8 +130,7 @@ bool Ftu::run(RayPacket& rp, uint32_t rp_pointer, uint32_t cv_tag, SampleBatch& 
         f = math_.cell_at(ray.ray, ray.k, kMicroPerFine);
         known_f[size_t(r)] = f;
         known_k[size_t(r)] = ray.k;
-        const Vec3i c = coarse_of(f);
-        if (linear_index(c.x, c.y, c.z, cr) != cv_tag) return false;
+        if (!in_cv(f)) return false;
       }
       sel.selected_mask = uint8_t(active);
       sel.voxel = f;
