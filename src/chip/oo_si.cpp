@@ -22,8 +22,7 @@ void OooSi::push(const LsEntry& entry) {
 std::optional<int> OooSi::select(const FeatureCache& cache) {
   // A block becomes present only by a fill, and an entry only by a push:
   // with neither since the last empty answer, the answer stays empty.
-  const uint64_t fills = cache.counters().fills;
-  if (!(waiting_ && waited_fills_ == fills && waited_pushes_ == counters_.pushed)) {
+  if (!known_waiting(cache)) {
     const int n = out_of_order_ ? size() : std::min(size(), 1);
     for (int i = 0; i < n; ++i)
       if (cache.present(queue_[size_t(i)].block)) {
@@ -31,7 +30,7 @@ std::optional<int> OooSi::select(const FeatureCache& cache) {
         return i;
       }
     waiting_ = true;
-    waited_fills_ = fills;
+    waited_fills_ = cache.counters().fills;
     waited_pushes_ = counters_.pushed;
   }
   ++counters_.waits;

@@ -51,6 +51,13 @@ class OooSi {
   void push(const LsEntry& entry);  // throws std::logic_error when full
   // The queue position to issue next, or nothing (wait for a fill).
   std::optional<int> select(const FeatureCache& cache);
+  // True when select() is known to find nothing: it found nothing last time
+  // and no fill and no push came since.
+  bool known_waiting(const FeatureCache& cache) const {
+    return waiting_ && waited_fills_ == cache.counters().fills && waited_pushes_ == counters_.pushed;
+  }
+  // Counts n select() calls that known_waiting() said find nothing.
+  void repeat_waits(uint64_t n) { counters_.waits += n; }
   // Removes the entry at `position`; the younger entries shift down.
   LsEntry take(int position);
 

@@ -12,17 +12,59 @@ namespace edrnr::sim::engine {
 uint64_t Engine::quiet_until(uint64_t c) {
   // The most frequent reasons to step the next cycle are tested first.
   const uint64_t next = c + 1;
-  // OoO-SI, CFIU, TME and VRU: quiet only when empty.
-  if (!ooo_.empty() || tme_s_.holding || vru_s_.holding || !tme_in_.empty() || !vru_in_.empty()) return next;
-  if (tme_s_.loading || (cfiu_s_.active && c >= cfiu_s_.start)) return next;
+  const CfiuShell& cf = cfiu_s_;
+  const TmeShell& tm = tme_s_;
+  const VruShell& vr = vru_s_;
+  const bool streaming = cf.active && c >= cf.start;  // the CFIU reads samples (from the cycle after its issue)
+  // The CFIU hands a sample to the TME next cycle.
+  if (streaming && cf.left <= 1 && tme_in_.can_push()) return next;
+  // An item visible to a free TME or VRU.
+  if (!tm.holding && tme_in_.can_pop(next)) return next;
+  if (!vr.holding && vru_in_.can_pop(next)) return next;
+  if (tm.loading || (tm.holding && tm.left == 0)) return next;  // a weight load, or a sample waiting for room
   if (!retry_micro_.empty() || !retry_mlp_.empty()) return next;
   if (prefetch_next_ < prefetch_lines_.size() || !bitmaps_ready_) return next;
+  // OoO-SI: waits for the CFIU (its next action is bounded below), or for a
+  // fill; anything else may issue.
+  UnitState* st = quiet_state_;
+  if (ooo_.empty())
+    st[kOooSi] = UnitState::Idle;
+  else if (cf.active)
+    st[kOooSi] = UnitState::StallOutput;
+  else if (ooo_.known_waiting(cfiu_.cache()))
+    st[kOooSi] = UnitState::StallMemory;
+  else
+    return next;
   uint64_t u = UINT64_MAX;
   auto until = [&](uint64_t t) { u = std::min(u, std::max(t, next)); };
-  if (cfiu_s_.active) until(cfiu_s_.start);
+  // CFIU, TME and VRU count down their samples (each acts in the cycle its
+  // count reaches its last), and the TME and VRU, when free, wait for their
+  // queue's head to become visible; the CFIU, with its sample done, waits for
+  // room that only the TME's pop makes.
+  if (!cf.active || !streaming) {
+    if (cf.active) until(cf.start);
+    st[kCfiu] = UnitState::Idle;
+  } else if (cf.left > 1) {
+    until(next + cf.left - 1);
+    st[kCfiu] = UnitState::Busy;
+  } else {
+    st[kCfiu] = UnitState::StallOutput;
+  }
+  if (tm.holding) {
+    until(next + tm.left - 1);
+    st[kTme] = UnitState::Busy;
+  } else {
+    until(tme_in_.head_visible_cycle());
+    st[kTme] = UnitState::Idle;
+  }
+  if (vr.holding) {
+    until(next + vr.left - 1);
+    st[kVru] = UnitState::Busy;
+  } else {
+    until(vru_in_.head_visible_cycle());
+    st[kVru] = UnitState::Idle;
+  }
   until(done_q_.head_visible_cycle());
-  UnitState* st = quiet_state_;
-  st[kOooSi] = st[kCfiu] = st[kTme] = st[kVru] = UnitState::Idle;
   // Front end: a packet counting down, or a hand-over waiting for room
   // that only another unit's action makes, or the frame done.
   if (fe_.holding) {
@@ -33,8 +75,8 @@ uint64_t Engine::quiet_until(uint64_t c) {
   } else {
     st[kFrontEnd] = UnitState::Idle;
   }
-  // CTU: counting down, an insert the RP-ROB keeps refusing, or waiting
-  // for its FIFOs' next item.
+  // CTU: counting down, an insert the RP-ROB keeps refusing, or free and
+  // waiting for its FIFOs' next item.
   if (ctu_s_.holding) {
     if (c < ctu_s_.end)
       until(ctu_s_.end);
@@ -44,10 +86,11 @@ uint64_t Engine::quiet_until(uint64_t c) {
   } else if (retire_q_.can_pop(c) || fe_out_.can_pop(c)) {
     return next;
   } else {
+    // Its FIFOs matter only to a free CTU: a holding one pops after it hands over.
+    until(retire_q_.head_visible_cycle());
+    until(fe_out_.head_visible_cycle());
     st[kCtu] = UnitState::Idle;
   }
-  until(retire_q_.head_visible_cycle());
-  until(fe_out_.head_visible_cycle());
   // FTU: its result waiting for a full OoO-SI; or all its micro-grid words
   // read and its run counting down; or free with nothing to schedule.
   const FtuShell& f = ftu_s_;
@@ -73,11 +116,19 @@ uint64_t Engine::quiet_until(uint64_t c) {
 }
 
 // Counts cycles [first, first + n) as quiet_until() found them: each unit
-// in its state (the FIFOs count them when they next change), the memory
-// clocks run, refused RP-ROB inserts repeated.
+// in its state (the FIFOs count them when they next change), the back end's
+// countdowns run down, the memory clocks run, refused RP-ROB inserts and
+// OoO-SI waits repeated.
 void Engine::skip(uint64_t first, uint64_t n) {
-  for (uint32_t u = 0; u < kUnits; ++u) activity_.repeat(u, quiet_state_[u], first, n);
+  // In the order the cycle loop steps the units (back end first), so that
+  // intervals close in the same order as when every cycle is stepped.
+  for (uint32_t u = kUnits; u-- > 0;) activity_.repeat(u, quiet_state_[u], first, n);
   if (ctu_s_.holding && first > ctu_s_.end) rob_.repeat_refused_insert(n);
+  // The back end's countdowns (quiet_until() ended the skip before any reaches its last).
+  if (quiet_state_[kCfiu] == UnitState::Busy) cfiu_s_.left -= uint32_t(n);
+  if (quiet_state_[kTme] == UnitState::Busy) tme_s_.left -= n;
+  if (quiet_state_[kVru] == UnitState::Busy) vru_s_.left -= n;
+  if (quiet_state_[kOooSi] == UnitState::StallMemory) ooo_.repeat_waits(n);
   completions_.clear();
   mem_.advance(first + n - 1, completions_);  // the DRAM clocks, ticking only where it must
   if (!completions_.empty()) throw std::logic_error("cycle simulator: a memory completion in skipped cycles");

@@ -117,6 +117,16 @@ TEST(Shortcuts, EveryStatisticTraceAndImageMatchSteppingEveryCycle) {
     c.chip.switches.ooo_issue = false;
   });
   add("large RP buffer", [](SimConfig& c) { c.chip.rp_buffer_capacity = 256; });
+  // Samples that take several cycles in each back-end unit, bank conflicts
+  // and a shadow weight buffer: the CFIU, TME and VRU count down between
+  // their actions.
+  add("slow back end", [](SimConfig& c) {
+    c.timing.cfiu_cycles_per_sample = 2;
+    c.timing.tme_macs_per_cycle = 128;
+    c.timing.vru_cycles_per_sample = 3;
+    c.timing.tme_weight_buffers = 2;
+    c.chip.bank_mapping = chip::BankMapping::Linear;
+  });
   double skipped = 0;
   for (const auto& [name, cfg] : variants) {
     SCOPED_TRACE(name);
