@@ -140,6 +140,7 @@ void Engine::run() {
     }
   }
   cycles_ = cycle_ + 1;
+  mem_.sync();  // the DRAM's idle clocks through the last cycle
   if (opt_.progress) opt_.progress({cycles_, rps_done_, zorg_.packet_count()});
   activity_.finish();
   worker_.reset();

@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 
 #include "core/error.h"
 #include "model/footprint.h"
@@ -92,6 +93,7 @@ MemorySystem::MemorySystem(const DramConfig& dram, double core_clock_MHz, uint32
 
 void MemorySystem::start(DataType type, bool write, uint64_t addr, uint32_t bytes, uint64_t tag, uint64_t cycle) {
   if (bytes == 0) fail("memory transfer of 0 bytes at address {}", addr);
+  sync();  // the DRAM as it ends the cycle before
   uint32_t index;
   if (free_transfers_.empty()) {
     index = uint32_t(transfers_.size());
@@ -135,14 +137,21 @@ void MemorySystem::write(DataType type, uint64_t addr, uint32_t bytes, uint64_t 
   start(type, true, addr, bytes, 0, cycle);
 }
 
-void MemorySystem::advance(uint64_t cycle, std::vector<MemoryCompletion>& done) {
+const DramSystem& MemorySystem::dram() const {
+  if (idle_pending_) throw std::logic_error("MemorySystem::dram() const: call sync() first");
+  return dram_;
+}
+
+void MemorySystem::run_idle() {
+  // Nothing to hand over and nothing in flight: the same clocks in bulk.
+  idle_pending_ = false;
+  dram_.advance_idle(dram_target(idle_through_));
+}
+
+void MemorySystem::advance_busy(uint64_t cycle, std::vector<MemoryCompletion>& done) {
+  sync();
   const uint64_t target = dram_target(cycle);
   bool refused = false;
-  if (waiting_.empty() && dram_.idle()) {
-    // Nothing to hand over and nothing in flight: the same clocks in bulk.
-    dram_.advance_idle(target);
-    return;
-  }
   while (dram_.cycle() < target) {
     while (!waiting_.empty()) {
       const Request& r = waiting_.front();
@@ -226,6 +235,7 @@ uint64_t MemorySystem::unique_read_bytes(DataType t) const {
 }
 
 void MemorySystem::update_stats() {
+  sync();
   dram_.update_stats();
   for (int t = 0; t < kDataTypes; ++t)
     per_type_[size_t(t)].unique_read_bytes->set(double(unique_read_bytes(DataType(t))));

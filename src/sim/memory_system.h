@@ -85,8 +85,22 @@ class MemorySystem {
   void write(DataType type, uint64_t addr, uint32_t bytes, uint64_t cycle);
 
   // Runs the DRAM through the end of core cycle `cycle` and appends the reads
-  // that completed to `done` (in completion order).
-  void advance(uint64_t cycle, std::vector<MemoryCompletion>& done);
+  // that completed to `done` (in completion order). With no transfer in
+  // flight the DRAM's clocks (refreshes, background cycles) are run later,
+  // in one go, before the next transfer starts or the DRAM is looked at.
+  void advance(uint64_t cycle, std::vector<MemoryCompletion>& done) {
+    if (idle()) {
+      idle_through_ = cycle;
+      idle_pending_ = true;
+      return;
+    }
+    advance_busy(cycle, done);
+  }
+  // Runs the clocks advance() left for later (call before reading the DRAM's
+  // state through dram() const).
+  void sync() {
+    if (idle_pending_) run_idle();
+  }
 
   // Optional observer of the DRAM requests: called once per request as a
   // transfer is split, with the DRAM clock at which the request is first
@@ -104,8 +118,13 @@ class MemorySystem {
   // No transfer waiting or in flight.
   bool idle() const { return transfers_in_flight_ == 0; }
   uint64_t transfers_in_flight() const { return transfers_in_flight_; }
-  const DramSystem& dram() const { return dram_; }
-  DramSystem& dram() { return dram_; }
+  // The DRAM as of the last advance(). The const form throws
+  // std::logic_error while clocks are left for later (call sync() first).
+  const DramSystem& dram() const;
+  DramSystem& dram() {
+    sync();
+    return dram_;
+  }
 
   // Bytes read and written per type (as requested, not rounded to bursts).
   uint64_t read_bytes(DataType t) const { return per_type_[size_t(t)].read_bytes->value; }
@@ -142,6 +161,8 @@ class MemorySystem {
     std::vector<uint8_t> touched;  // per 8 bytes of the region, a mask of the bytes read
   };
   void start(DataType type, bool write, uint64_t addr, uint32_t bytes, uint64_t tag, uint64_t cycle);
+  void advance_busy(uint64_t cycle, std::vector<MemoryCompletion>& done);
+  void run_idle();  // the clocks through idle_through_ (nothing in flight)
 
   DramSystem dram_;
   AddressMap map_;
@@ -150,6 +171,10 @@ class MemorySystem {
   // target_cycle_; they start as those of cycle -1 (UINT64_MAX), 0 and 0.
   uint64_t dram_per_core_ = 0, dram_per_core_rem_ = 0;
   uint64_t target_cycle_ = UINT64_MAX, target_ = 0, target_rem_ = 0;
+  // advance() with nothing in flight: the DRAM is still to run through the
+  // end of core cycle idle_through_.
+  bool idle_pending_ = false;
+  uint64_t idle_through_ = 0;
   uint32_t max_request_bytes_;
   std::vector<Transfer> transfers_;
   std::vector<uint32_t> free_transfers_;

@@ -2,7 +2,9 @@
 // clock crossing and address map, the activity recorder.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
+#include <stdexcept>
 
 #include "chip/chip.h"
 #include "core/error.h"
@@ -84,6 +86,35 @@ TEST(MemorySystem, ReadLatencyFollowsTheClockRatio) {
     EXPECT_EQ(stats.get("mem.bitmaps.read_bytes"), 64.0);
     EXPECT_EQ(stats.get("dram.read_bytes"), 64.0);
   }
+}
+
+// With nothing in flight advance() leaves the DRAM's clocks for later; they
+// run before the next transfer starts, so the DRAM it meets has ticked
+// floor(c f_dram / f_core) times (800 MHz against 380 MHz) and refreshed on
+// schedule, as if every cycle had been run.
+TEST(MemorySystem, IdleClocksRunBeforeTheNextTransfer) {
+  const DramConfig dram = load_dram_config(kDram);
+  ASSERT_TRUE(dram.refresh);
+  AddressMap map;
+  map.bytes = {4096, 0, 0, 0, 0};
+  StatsRegistry stats;
+  MemorySystem mem(dram, 380.0, 64, map, stats);
+  std::vector<uint64_t> offered;
+  mem.set_request_observer([&](uint64_t dram_cycle, DramOp, uint64_t, uint32_t) { offered.push_back(dram_cycle); });
+  std::vector<MemoryCompletion> done;
+  const uint64_t idle_cycles = 100000;
+  for (uint64_t c = 0; c < idle_cycles; ++c) mem.advance(c, done);
+  EXPECT_THROW(static_cast<const MemorySystem&>(mem).dram(), std::logic_error);  // its clocks are still to run
+  mem.read(DataType::Bitmaps, 0, 64, 1, idle_cycles);
+  ASSERT_EQ(offered.size(), 1u);
+  const uint64_t dram_hz = uint64_t(std::llround(1e9 / dram.tCK_ns));
+  EXPECT_EQ(offered[0], idle_cycles * dram_hz / 380000000u);  // the DRAM as the core cycle before ended
+  for (uint64_t c = idle_cycles; done.empty(); ++c) mem.advance(c, done);
+  for (uint64_t c = 0; c < idle_cycles; ++c) mem.advance(2 * idle_cycles + c, done);
+  mem.sync();
+  const uint64_t ticks = 3 * idle_cycles * dram_hz / 380000000u;
+  EXPECT_EQ(static_cast<const MemorySystem&>(mem).dram().cycle(), ticks);
+  EXPECT_EQ(stats.get("dram.cmd_refresh"), double(ticks / dram.tREFI));  // one per tREFI
 }
 
 TEST(MemorySystem, SplitsTransfersAndCountsUniqueBytes) {
