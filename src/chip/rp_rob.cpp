@@ -97,7 +97,7 @@ ScheduledRp RpRob::pop(int e) {
   return {r.rp, r.tag, e};
 }
 
-std::optional<ScheduledRp> RpRob::schedule_scan() {
+bool RpRob::schedule_scan(ScheduledRp& out) {
   waiting_ = false;
   if (!config_.reorder) {
     int best = -1;
@@ -106,11 +106,11 @@ std::optional<ScheduledRp> RpRob::schedule_scan() {
       if (en.ready > 0 && (best < 0 || queues_[size_t(e)].front().stamp < queues_[size_t(best)].front().stamp))
         best = e;
     }
-    if (best < 0) return std::nullopt;
-    ScheduledRp s = pop(best);
+    if (best < 0) return false;
+    out = pop(best);
     has_current_ = true;
-    current_ = s.tag;
-    return s;
+    current_ = out.tag;
+    return true;
   }
   if (has_current_) {
     // Serve the current tag: its entry with the most free room.
@@ -122,10 +122,13 @@ std::optional<ScheduledRp> RpRob::schedule_scan() {
       any_placeholder = true;
       if (en.ready > 0 && (best < 0 || en.count < entries_[size_t(best)].count)) best = e;
     }
-    if (best >= 0) return pop(best);
+    if (best >= 0) {
+      out = pop(best);
+      return true;
+    }
     if (any_placeholder && !config_.switch_when_idle) {
       waiting_ = true;
-      return std::nullopt;  // wait until they come back or retire
+      return false;  // wait until they come back or retire
     }
   }
   // Tag switch.
@@ -144,12 +147,13 @@ std::optional<ScheduledRp> RpRob::schedule_scan() {
   int chosen = hit >= 0 ? hit : other;
   if (chosen < 0) {
     has_current_ = false;
-    return std::nullopt;
+    return false;
   }
   if (hit >= 0) ++counters_.recorder_hits;
   has_current_ = true;
   current_ = entries_[size_t(chosen)].tag;
-  return pop(chosen);
+  out = pop(chosen);
+  return true;
 }
 
 RpRob::Place& RpRob::in_flight_place(uint32_t rp, const char* op) {

@@ -97,10 +97,16 @@ class RpRob {
     return insert_scan(rp, tag);
   }
   std::optional<ScheduledRp> schedule() {
-    if (nothing_version_ == version_) return std::nullopt;  // nothing changed since the last empty answer
-    const std::optional<ScheduledRp> s = schedule_scan();
-    if (!s) nothing_version_ = version_;
+    ScheduledRp s;
+    if (!schedule(s)) return std::nullopt;
     return s;
+  }
+  // The same, into `out`: true when an RP was scheduled.
+  bool schedule(ScheduledRp& out) {
+    if (nothing_version_ == version_) return false;  // nothing changed since the last empty answer
+    if (schedule_scan(out)) return true;
+    nothing_version_ = version_;
+    return false;
   }
   void reschedule(uint32_t rp);  // throws std::logic_error unless rp is in flight
   void retire(uint32_t rp);      // throws std::logic_error unless rp is in flight
@@ -152,7 +158,7 @@ class RpRob {
   void note_recent(uint32_t tag);
   bool in_recent(uint32_t tag) const;
   ScheduledRp pop(int e);
-  std::optional<ScheduledRp> schedule_scan();   // schedule() without the memo
+  bool schedule_scan(ScheduledRp& out);         // schedule() without the memo
   bool insert_scan(uint32_t rp, uint32_t tag);  // insert() without the memo
   Place& in_flight_place(uint32_t rp, const char* op);
 

@@ -270,17 +270,16 @@ inline void Engine::step_ftu() {
   if (!s.holding && bitmaps_ready_) {
     if (free_slots_.empty()) {
       if (!rob_.empty()) st = UnitState::StallOutput;
-    } else if (const auto sched = rob_.schedule()) {
-      if (cfg_.memory.mlp_prefetch && (!prefetch_started_ || sched->tag != prefetch_tag_))
-        start_mlp_prefetch(sched->tag);
-      s.rp = sched->rp;
+    } else if (ScheduledRp sched; rob_.schedule(sched)) {
+      if (cfg_.memory.mlp_prefetch && (!prefetch_started_ || sched.tag != prefetch_tag_)) start_mlp_prefetch(sched.tag);
+      s.rp = sched.rp;
       s.slot = free_slots_.back();
       free_slots_.pop_back();
       FtuRun* run = &ftu_run_;
       if (ftu_ahead_)
-        run = &ftu_ahead_->take(sched->rp, sched->tag, ftu_);
+        run = &ftu_ahead_->take(sched.rp, sched.tag, ftu_);
       else
-        run_ftu(ftu_, buffer_[sched->rp], sched->rp, sched->tag, ftu_run_);
+        run_ftu(ftu_, buffer_[sched.rp], sched.rp, sched.tag, ftu_run_);
       s.has_batch = run->has_batch;
       std::swap(batches_[s.slot], run->batch);
       const FtuCounters& d = run->counts;
