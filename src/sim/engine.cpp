@@ -123,19 +123,27 @@ void Engine::run() {
       opt_.progress({cycle_ + 1, rps_done_, zorg_.packet_count()});
       next_progress += opt_.progress_interval_cycles;
     }
-    // Cycles in which nothing can change are counted, not run. The deadlock
-    // and progress checks still fall on the cycles they would.
+    // Cycles in which no unit can act are counted, not run; the memory runs
+    // through them and a transfer completing ends them. The deadlock and
+    // progress checks still fall on the cycles they would.
     uint64_t until = opt_.skip_quiet_cycles ? quiet_until(cycle_) : cycle_ + 1;
     if (until > cycle_ + 1) {
-      bool busy = false;
-      for (UnitState q : quiet_state_) busy |= q == UnitState::Busy;
-      busy |= !mem_.idle();
-      if (!busy) until = std::min(until, cycle_ + 1 + (opt_.deadlock_cycles - quiet));
+      bool units_busy = false;
+      for (UnitState q : quiet_state_) units_busy |= q == UnitState::Busy;
+      const bool mem_busy = !mem_.idle();
+      if (!units_busy && !mem_busy) until = std::min(until, cycle_ + 1 + (opt_.deadlock_cycles - quiet));
       if (opt_.progress) until = std::min(until, std::max(next_progress - 1, cycle_ + 1));
       if (until > cycle_ + 1) {
-        skip(cycle_ + 1, until - cycle_ - 1);
-        quiet = busy ? 0 : quiet + (until - cycle_ - 1);
-        cycle_ = until - 1;
+        const uint64_t first = cycle_ + 1;
+        completions_.clear();
+        const uint64_t last = mem_.advance_through(first, until - 1, completions_);
+        skip(first, last + 1 - first);
+        cycle_ = last;
+        // Quiet cycles: those with no unit busy and no transfer in flight at their end.
+        quiet = units_busy || !mem_.idle() ? 0 : mem_busy ? 1 : quiet + (last + 1 - first);
+        for (const MemoryCompletion& c : completions_) deliver(c);
+        retry_fills();
+        if (zorg_.done() && !fe_.holding && buffer_.in_use() == 0 && mem_.idle()) break;
       }
     }
   }

@@ -69,15 +69,17 @@ class Engine {
  private:
   // ------------------------------------------------------------ skipping
 
-  // After cycle c has run: the first later cycle in which any unit, FIFO or
-  // the memory system may act differently from c (a countdown ending, an
-  // item becoming visible). In the cycles between, every unit reports c's
-  // state, and the only side effects are the per-cycle counts that skip()
-  // adds in bulk. c + 1 when that cannot be shown.
+  // After cycle c has run: the first later cycle in which any unit or FIFO
+  // may act differently from c (a countdown ending, an item becoming
+  // visible), unless the memory delivers first (the caller runs the memory
+  // through the cycles between and ends them at a completion). In those
+  // cycles every unit reports c's state, and the only side effects are the
+  // per-cycle counts that skip() adds in bulk. c + 1 when that cannot be
+  // shown.
   uint64_t quiet_until(uint64_t c);
   // Counts cycles [first, first + n) as quiet_until() found them: each unit
-  // in its state, the FIFOs sampled, the memory clocks run, refused RP-ROB
-  // inserts repeated.
+  // in its state, the back end's countdowns run down, refused RP-ROB inserts
+  // and OoO-SI waits repeated.
   void skip(uint64_t first, uint64_t n);
 
   // ------------------------------------------------------------ units

@@ -180,6 +180,18 @@ void MemorySystem::advance_busy(uint64_t cycle, std::vector<MemoryCompletion>& d
   if (refused) ++dram_rejections_;
 }
 
+uint64_t MemorySystem::advance_through(uint64_t first, uint64_t last, std::vector<MemoryCompletion>& done) {
+  if (!waiting_.empty()) throw std::logic_error("MemorySystem::advance_through with requests waiting");
+  const uint64_t in_flight = transfers_in_flight_;
+  for (uint64_t c = first;;) {
+    // Nothing changes but the clocks before core cycle quiet_until(c - 1).
+    const uint64_t e = std::max(c, quiet_until(c - 1));
+    advance(std::min(e, last), done);
+    if (e >= last || transfers_in_flight_ != in_flight) return std::min(e, last);
+    c = e + 1;
+  }
+}
+
 uint64_t MemorySystem::dram_target(uint64_t cycle) {
   // floor((cycle + 1) dram_hz / core_hz): from the last cycle's quotient and
   // remainder when the cycles follow each other (no division per cycle).

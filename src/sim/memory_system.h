@@ -109,6 +109,15 @@ class MemorySystem {
   // the requests as a trace (sim/dram_trace.h) with it.
   void set_request_observer(DramRequestObserver observer) { request_observer_ = std::move(observer); }
 
+  // advance() for core cycles first, first + 1, ..., last, in one call with
+  // no transfer waiting to be handed over (requests_waiting() false): the
+  // DRAM runs from event to event and stops at the end of the first cycle
+  // in which a transfer completes (its reads appended to `done`). Returns
+  // that cycle, or `last`.
+  uint64_t advance_through(uint64_t first, uint64_t last, std::vector<MemoryCompletion>& done);
+  // Requests of started transfers that the DRAM's queue has not taken yet.
+  bool requests_waiting() const { return !waiting_.empty(); }
+
   // After advance(cycle): the first later core cycle whose advance() may
   // complete a transfer or change the DRAM other than by counting clocks
   // (UINT64_MAX: none until a request comes). The calls for the cycles
