@@ -117,6 +117,45 @@ TEST(MemorySystem, IdleClocksRunBeforeTheNextTransfer) {
   EXPECT_EQ(stats.get("dram.cmd_refresh"), double(ticks / dram.tREFI));  // one per tREFI
 }
 
+// advance_through() over many cycles gives the completions of advance() cycle
+// by cycle, each in its cycle, and stops at the first.
+TEST(MemorySystem, AdvanceThroughStopsAtEachCompletion) {
+  const DramConfig dram = load_dram_config(kDram);
+  AddressMap map;
+  map.bytes = {1 << 20, 0, 0, 0, 0};
+  std::vector<std::pair<uint64_t, uint64_t>> by_cycle, through;  // (cycle, tag)
+  StatsRegistry stats_a, stats_b;
+  MemorySystem a(dram, 380.0, 64, map, stats_a), b(dram, 380.0, 64, map, stats_b);
+  for (MemorySystem* m : {&a, &b}) {
+    m->read(DataType::Bitmaps, 0, 640, 1, 0);
+    m->read(DataType::Bitmaps, 300000, 64, 2, 0);  // another row
+    m->write(DataType::Bitmaps, 700000, 64, 0);
+    m->read(DataType::Bitmaps, 4096, 128, 3, 0);
+  }
+  std::vector<MemoryCompletion> done;
+  a.advance(0, done);
+  b.advance(0, done);
+  ASSERT_TRUE(done.empty());
+  for (uint64_t c = 1; !a.idle(); ++c) {
+    a.advance(c, done);
+    for (const MemoryCompletion& m : done) by_cycle.push_back({c, m.tag});
+    done.clear();
+  }
+  uint64_t stops = 0;
+  for (uint64_t c = 1; !b.idle(); ++c, ++stops) {
+    c = b.advance_through(c, c + 1000000, done);
+    for (const MemoryCompletion& m : done) through.push_back({c, m.tag});
+    done.clear();
+  }
+  ASSERT_EQ(by_cycle.size(), 3u);
+  EXPECT_EQ(through, by_cycle);
+  EXPECT_EQ(stops, 4u);  // three reads and the write, each ending a call
+  a.sync();
+  b.sync();
+  EXPECT_EQ(static_cast<const MemorySystem&>(a).dram().cycle(), static_cast<const MemorySystem&>(b).dram().cycle());
+  EXPECT_EQ(stats_a.get("dram.active_rank_cycles"), stats_b.get("dram.active_rank_cycles"));
+}
+
 TEST(MemorySystem, SplitsTransfersAndCountsUniqueBytes) {
   const DramConfig dram = load_dram_config(kDram);
   AddressMap map;
