@@ -12,11 +12,11 @@
 //   bench_sim --benchmark_filter='BM_Simulate/frame:0/|BM_Reference/frame:0'   # lego
 //   bench_sim --benchmark_filter='BM_Simulate/frame:[0-3]/threads:1|BM_Simulate/frame:0/threads:2|BM_Reference'
 //   bench_sim --benchmark_filter=MemorySystem
-// Last figures (wall s, load average about 1.7, two runs; docs/simulator.md
-// "Host speed"): lego one thread 1.22 against the reference renderer's
-// 1.10-1.11 in the same runs (1.10-1.11x), two threads about 0.89-0.93
-// when the host leaves both cores; mic one thread 0.94-0.95 against
-// 0.93-0.94 (1.00-1.01x).
+// Last figures (wall s, noisy host; docs/simulator.md "Host speed"): lego
+// one thread about 1.23-1.27 against the reference renderer's 1.13-1.22
+// when the two alternate (median ratio 1.09), two threads about 0.89-0.93
+// when the host leaves both cores; mic one thread about 1.0x the
+// reference.
 // A frame whose model or dataset is missing is skipped with a message.
 #include <benchmark/benchmark.h>
 
