@@ -162,7 +162,13 @@ TmeMlp compile_tme_mlp(const SceneModel& model, size_t index, const ChipNumerics
 }
 
 std::vector<int32_t> Tme::encode_direction(const Vec3d& dir, int frequencies, const ChipNumerics& n) {
-  std::vector<int32_t> out(3 + 6 * size_t(std::max(frequencies, 0)));
+  std::vector<int32_t> out;
+  encode_direction(dir, frequencies, n, out);
+  return out;
+}
+
+void Tme::encode_direction(const Vec3d& dir, int frequencies, const ChipNumerics& n, std::vector<int32_t>& out) {
+  out.resize(3 + 6 * size_t(std::max(frequencies, 0)));
   int32_t* code = out.data();
   const int frac_bits = n.direction_code_frac_bits, bits = n.direction_code_bits;
   const fx::Rounding mode = n.rounding;
@@ -189,7 +195,6 @@ std::vector<int32_t> Tme::encode_direction(const Vec3d& dir, int frequencies, co
     for (int a = 0; a < 3; ++a) put(sin_v[size_t(3 * k + a)]);
     for (int a = 0; a < 3; ++a) put(cos_v[size_t(3 * k + a)]);
   }
-  return out;
 }
 
 Tme::Tme(const SceneModel& model, const ChipNumerics& numerics, double delta, size_t mlp_cache_bytes)

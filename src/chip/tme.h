@@ -162,6 +162,9 @@ class Tme {
   // Direction encoding [d, sin(2^k d), cos(2^k d) for k < L] as signed
   // direction_code_bits codes with direction_code_frac_bits fraction bits.
   static std::vector<int32_t> encode_direction(const Vec3d& dir, int frequencies, const ChipNumerics& numerics);
+  // The same into `out` (resized; its storage reused).
+  static void encode_direction(const Vec3d& dir, int frequencies, const ChipNumerics& numerics,
+                               std::vector<int32_t>& out);
 
   const TmeMlp& mlp(size_t i) const { return mlps_[i]; }
   size_t mlp_count() const { return mlps_.size(); }

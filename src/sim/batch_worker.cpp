@@ -60,10 +60,14 @@ BatchArithmetic::BatchArithmetic(const SceneModel& model, const ChipConfig& conf
 
 void BatchArithmetic::direction_of(RayState& ray, TmeDirection& out) {
   if (ray.dir_input.empty()) {
-    // The front end leaves the encoding to this thread; both the codes and
-    // the inputs made from them are kept with the ray for its next batches.
-    if (ray.dir_code.empty()) ray.dir_code = Tme::encode_direction(ray.world_dir, model_.mlp_arch.dir_frequencies, n_);
-    tme_.direction_input(ray.dir_code, out);
+    // The front end leaves the encoding to this thread; the inputs made
+    // from the codes are kept with the ray for its next batches.
+    const std::vector<int32_t>* code = &ray.dir_code;
+    if (code->empty()) {  // not kept: the inputs are
+      Tme::encode_direction(ray.world_dir, model_.mlp_arch.dir_frequencies, n_, dir_code_);
+      code = &dir_code_;
+    }
+    tme_.direction_input(*code, out);
     ray.dir_input = out.x;
     ray.dir_input_saturations = out.saturations;
   } else {

@@ -80,6 +80,7 @@ class BatchArithmetic {
   std::vector<chip::TmeOutput> outputs_;                  // per sample
   std::vector<const chip::TmeDirection*> dir_of_sample_;  // per sample: its ray's direction inputs
   std::vector<chip::TmeDirection> dirs_;                  // per ray of the packet
+  std::vector<int32_t> dir_code_;                         // a ray's direction codes, before its inputs
   std::vector<uint64_t> dir_batch_;                       // per ray: the batch dirs_ was computed for
   uint64_t batch_ = 0;
   struct Deferred {

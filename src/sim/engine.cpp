@@ -165,7 +165,7 @@ inline void Engine::step_front_end() {
   const uint64_t c = cycle_;
   UnitState st = UnitState::Idle;
   if (fe_.holding && c >= fe_.end) {
-    if (!fe_.packet.live_mask()) {  // background only: no pointer needed
+    if (!fe_.live) {  // background only: no pointer needed
       ++packets_dropped_;
       write_pixels(fe_.packet);
       write_output_record(fe_.sequence);
@@ -199,6 +199,7 @@ inline void Engine::step_front_end() {
     const uint64_t tsps_cycles = ceil_div(evals, uint64_t(t_.tsps_position_evals_per_cycle));
     fe_.end = c + std::max<uint64_t>(uint64_t(t_.zorg_cycles_per_rp), tsps_cycles);
     fe_.sequence = quad.sequence;
+    fe_.live = fe_.packet.live_mask() != 0;
     fe_.holding = true;
   }
   if (fe_.holding && c < fe_.end) st = UnitState::Busy;

@@ -166,6 +166,7 @@ class Engine {
 
   struct FrontEndShell {
     bool holding = false;
+    bool live = false;  // the packet has a ray to traverse (else only background pixels)
     uint64_t end = 0;
     uint64_t sequence = 0;
     RayPacket packet;
