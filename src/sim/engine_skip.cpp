@@ -45,20 +45,15 @@ uint64_t Engine::quiet_until(uint64_t c) {
   } else {
     st[kCfiu] = UnitState::StallOutput;
   }
-  if (tm.holding) {
-    until(next + tm.left - 1);
-    st[kTme] = UnitState::Busy;
-  } else {
-    until(tme_in_.head_visible_cycle());
-    st[kTme] = UnitState::Idle;
-  }
-  if (vr.holding) {
-    until(next + vr.left - 1);
-    st[kVru] = UnitState::Busy;
-  } else {
-    until(vru_in_.head_visible_cycle());
-    st[kVru] = UnitState::Idle;
-  }
+  auto sample_unit = [&](Unit unit, bool holding, uint64_t left, const Fifo<SampleToken>& in) {
+    if (holding)
+      until(next + left - 1);
+    else
+      until(in.head_visible_cycle());
+    st[unit] = holding ? UnitState::Busy : UnitState::Idle;
+  };
+  sample_unit(kTme, tm.holding, tm.left, tme_in_);
+  sample_unit(kVru, vr.holding, vr.left, vru_in_);
   until(done_q_.head_visible_cycle());
   // Front end: a packet counting down, or a hand-over waiting for room
   // that only another unit's action makes, or the frame done.
