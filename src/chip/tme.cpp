@@ -413,14 +413,7 @@ void Tme::direction_terms(const TmeLayer& L, int split, const fx::Requant& q, co
   int32_t* sum = abs_sum_.data();
   std::copy(d.x.begin(), d.x.end(), x + split);
   tme_dot_columns(L.wt.data(), size_t(L.out_pad), size_t(split), size_t(L.in), x, W, 1, sum, W);
-  const int A = n_.accumulator_bits;
-  t.saturations = 0;
-  for (int j = 0; j < L.out; ++j) {
-    const int64_t part = sum[j];
-    const int64_t p = fx::saturate(part, A);
-    t.saturations += p != part;
-    t.term[size_t(j)] = fx::requantize<M>(p, q);
-  }
+  t.saturations = fx::saturate_requantize_row<M>(sum, size_t(L.out), n_.accumulator_bits, q, t.term.data());
 }
 
 template <fx::Rounding M>

@@ -12,6 +12,7 @@
 // the integer q and stands for q * 2^-F.
 #include <bit>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 
@@ -153,6 +154,30 @@ constexpr int64_t requantize(int64_t x, Requant q) {
     if constexpr (M == Rounding::HalfUp) return (p + ((int64_t(1) << q.shift) >> 1)) >> q.shift;
   }
   return multiply_shift(x, q.multiplier, q.shift, M);
+}
+
+// out[j] = requantize<M>(saturate(x[j], bits), q) for j < n; returns how
+// many x[j] the saturation changed. The saturated values fit 32 bits, so
+// the 64-bit path's conditions are the multiplier's, checked once per row.
+template <Rounding M>
+uint64_t saturate_requantize_row(const int32_t* x, size_t n, int bits, Requant q, int64_t* out) {
+  const int64_t lo = min_signed(bits), hi = max_signed(bits);
+  uint64_t saturations = 0;
+  if (M != Rounding::HalfEven && q.multiplier == int32_t(q.multiplier) && q.shift >= 0 && q.shift <= 62) {
+    const int64_t half = M == Rounding::HalfUp ? (int64_t(1) << q.shift) >> 1 : 0;
+    for (size_t j = 0; j < n; ++j) {
+      const int64_t v = x[j], s = v < lo ? lo : (v > hi ? hi : v);
+      saturations += s != v;
+      out[j] = (s * q.multiplier + half) >> q.shift;
+    }
+    return saturations;
+  }
+  for (size_t j = 0; j < n; ++j) {
+    const int64_t v = x[j], s = saturate(v, bits);
+    saturations += s != v;
+    out[j] = requantize<M>(s, q);
+  }
+  return saturations;
 }
 
 // The (multiplier, shift) pair for a real scale > 0, with multiplier_bits in

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <vector>
 
 #include "core/error.h"
 #include "core/fixed_point.h"
@@ -165,6 +166,45 @@ TEST(FixedPoint, MultiplyShiftMatchesDivision) {
   EXPECT_EQ(multiply_shift(kMin64, kMin64, 126, Rounding::HalfUp), 1);  // 2^126 / 2^126
   EXPECT_EQ(multiply_shift(kMin64, 3, 64, Rounding::HalfEven), -2);     // -1.5 -> -2
   EXPECT_EQ(multiply_shift(kMin64, 3, 64, Rounding::HalfUp), -1);       // -1.5 -> -1
+}
+
+// A row saturated to `bits` and requantized, against saturate() and the
+// 128-bit requantize() value by value: accumulators of 8 to 40 bits,
+// multipliers inside and outside 32 bits, shifts 0 to 63, values over the
+// whole int32 range and exact halves, in every rounding mode.
+template <Rounding M>
+void check_saturate_requantize_row() {
+  std::mt19937_64 rng(11 + uint64_t(M));
+  std::vector<int32_t> x(64);
+  std::vector<int64_t> out(64);
+  for (int bits : {8, 20, 24, 32, 40}) {
+    for (int rep = 0; rep < 200; ++rep) {
+      Requant q;
+      q.shift = int(rng() % 64);
+      q.multiplier = rep % 7 == 0 ? int64_t(rng() >> 20) : int64_t(rng() >> 33);  // 44 or 31 bits
+      for (size_t j = 0; j < x.size(); ++j) {
+        const uint64_t r = rng();
+        x[j] = j % 4 == 0 ? int32_t(r) : int32_t(int64_t(r % 2000001) - 1000000) >> (r % 16);
+        if (j % 8 == 1 && q.shift > 0 && q.multiplier % 2 == 1)  // a product exactly half way
+          x[j] = int32_t(int64_t(1) << (q.shift - 1 < 30 ? q.shift - 1 : 30));
+      }
+      const uint64_t saturations = saturate_requantize_row<M>(x.data(), x.size(), bits, q, out.data());
+      uint64_t expected_saturations = 0;
+      for (size_t j = 0; j < x.size(); ++j) {
+        const int64_t s = saturate(x[j], bits);
+        expected_saturations += s != x[j];
+        ASSERT_EQ(out[j], requantize(s, q, M))
+            << "bits " << bits << " x " << x[j] << " q " << q.multiplier << " >> " << q.shift;
+      }
+      EXPECT_EQ(saturations, expected_saturations);
+    }
+  }
+}
+
+TEST(FixedPoint, SaturateRequantizeRowMatchesTheValueByValueFormulas) {
+  check_saturate_requantize_row<Rounding::Floor>();
+  check_saturate_requantize_row<Rounding::HalfUp>();
+  check_saturate_requantize_row<Rounding::HalfEven>();
 }
 
 TEST(FixedPoint, RequantFromDyadicScaleIsExact) {
