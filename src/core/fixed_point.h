@@ -146,13 +146,21 @@ constexpr int64_t requantize(int64_t x, Requant q, Rounding mode) {
 // |x| and the multiplier below 2^31 (an accumulator of at most 32 bits, a
 // multiplier of at most 31) the product and its rounding stay in 64 bits.
 template <Rounding M>
+constexpr bool requantize_fits_64(Requant q) {
+  return M != Rounding::HalfEven && q.multiplier == int32_t(q.multiplier) && q.shift >= 0 && q.shift <= 62;
+}
+// requantize<M>'s 64-bit path: x fits 32 bits and requantize_fits_64<M>(q).
+template <Rounding M>
+constexpr int64_t requantize_64(int64_t x, Requant q) {
+  const int64_t p = x * q.multiplier;  // |p| <= 2^62
+  if constexpr (M == Rounding::Floor) return p >> q.shift;
+  // floor((p + 2^(s-1)) / 2^s): ties up; no overflow with |p| <= 2^62.
+  return (p + ((int64_t(1) << q.shift) >> 1)) >> q.shift;
+}
+template <Rounding M>
 constexpr int64_t requantize(int64_t x, Requant q) {
-  if (x == int32_t(x) && q.multiplier == int32_t(q.multiplier) && q.shift >= 0 && q.shift <= 62) {
-    const int64_t p = x * q.multiplier;  // |p| <= 2^62
-    if constexpr (M == Rounding::Floor) return p >> q.shift;
-    // floor((p + 2^(s-1)) / 2^s): ties up; no overflow with |p| <= 2^62.
-    if constexpr (M == Rounding::HalfUp) return (p + ((int64_t(1) << q.shift) >> 1)) >> q.shift;
-  }
+  if constexpr (M != Rounding::HalfEven)
+    if (x == int32_t(x) && requantize_fits_64<M>(q)) return requantize_64<M>(x, q);
   return multiply_shift(x, q.multiplier, q.shift, M);
 }
 
@@ -163,12 +171,11 @@ template <Rounding M>
 uint64_t saturate_requantize_row(const int32_t* x, size_t n, int bits, Requant q, int64_t* out) {
   const int64_t lo = min_signed(bits), hi = max_signed(bits);
   uint64_t saturations = 0;
-  if (M != Rounding::HalfEven && q.multiplier == int32_t(q.multiplier) && q.shift >= 0 && q.shift <= 62) {
-    const int64_t half = M == Rounding::HalfUp ? (int64_t(1) << q.shift) >> 1 : 0;
+  if (requantize_fits_64<M>(q)) {
     for (size_t j = 0; j < n; ++j) {
       const int64_t v = x[j], s = v < lo ? lo : (v > hi ? hi : v);
       saturations += s != v;
-      out[j] = (s * q.multiplier + half) >> q.shift;
+      out[j] = requantize_64<M>(s, q);
     }
     return saturations;
   }

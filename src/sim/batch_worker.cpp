@@ -63,7 +63,7 @@ void BatchArithmetic::direction_of(RayState& ray, TmeDirection& out) {
     // The front end leaves the encoding to this thread; the inputs made
     // from the codes are kept with the ray for its next batches.
     const std::vector<int32_t>* code = &ray.dir_code;
-    if (code->empty()) {  // not kept: the inputs are
+    if (code->empty()) {  // encoded into a scratch buffer: only the inputs stay with the ray
       Tme::encode_direction(ray.world_dir, model_.mlp_arch.dir_frequencies, n_, dir_code_);
       code = &dir_code_;
     }

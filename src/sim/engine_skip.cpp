@@ -19,6 +19,7 @@ uint64_t Engine::quiet_until(uint64_t c) {
   if (tm.loading || (tm.holding && tm.left == 0)) return next;  // a weight load, or a sample waiting for room
   if (!retry_micro_.empty() || !retry_mlp_.empty()) return next;
   if (prefetch_next_ < prefetch_lines_.size() || !bitmaps_ready_) return next;
+  if (mem_.requests_waiting()) return next;  // handed to the DRAM as its queue takes them
   // OoO-SI: waits for the CFIU (its next action is bounded below), or for a
   // fill; anything else may issue.
   UnitState* st = quiet_state_;
@@ -101,7 +102,6 @@ uint64_t Engine::quiet_until(uint64_t c) {
   } else {
     st[kFtu] = UnitState::Idle;
   }
-  if (mem_.requests_waiting()) return next;  // handed to the DRAM as its queue takes them
   return u;
 }
 

@@ -149,7 +149,7 @@ void MemorySystem::run_idle() {
 }
 
 void MemorySystem::advance_busy(uint64_t cycle, std::vector<MemoryCompletion>& done) {
-  sync();
+  // Nothing is left for later here: a transfer starts with sync().
   const uint64_t target = dram_target(cycle);
   bool refused = false;
   while (dram_.cycle() < target) {
