@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "train/feature_kernels.h"
 #include "train/rng.h"
 
 namespace edrnr::train {
@@ -386,15 +387,17 @@ bool BlockFeatures::interpolate(const Vec3f& p, const Vec3i& m, float* out) cons
   block_corners(m, vid);
   float w[8];
   trilinear_weights(p.x - float(m.x), p.y - float(m.y), p.z - float(m.z), w);
-  std::fill(out, out + F, 0.f);
   const float* base = &value_[size_t(b) * kBlockVerts * size_t(F)];
+  if (quant_.empty()) {
+    const float* rows[8];
+    for (int c = 0; c < 8; ++c) rows[c] = base + size_t(vid[c]) * size_t(F);
+    feature_blend_rows(rows, w, size_t(F), out);
+    return true;
+  }
+  std::fill(out, out + F, 0.f);
   for (int c = 0; c < 8; ++c) {
     const float* v = base + size_t(vid[c]) * size_t(F);
-    if (quant_.empty()) {
-      for (int k = 0; k < F; ++k) out[k] += w[c] * v[k];
-    } else {
-      for (int k = 0; k < F; ++k) out[k] += w[c] * quant_[size_t(k)].fake(v[k]);
-    }
+    for (int k = 0; k < F; ++k) out[k] += w[c] * quant_[size_t(k)].fake(v[k]);
   }
   return true;
 }
@@ -418,17 +421,12 @@ void BlockFeatures::scatter_gradients(const GradientSlabs& slabs, const std::vec
       float w[8];
       trilinear_weights(pos[3 * s] - float(m.x), pos[3 * s + 1] - float(m.y), pos[3 * s + 2] - float(m.z), w);
       const float* g = &d_feat[s * size_t(F)];
-      for (int c = 0; c < 8; ++c) {
-        const size_t vtx = size_t(b) * kBlockVerts + size_t(vid[c]);
-        float* gv = &adam_.grad[vtx * size_t(F)];
-        bool was_zero = true, now_zero = true;
-        for (int k = 0; k < F; ++k) {
-          was_zero = was_zero && gv[k] == 0.f;
-          gv[k] += w[c] * g[k];
-          now_zero = now_zero && gv[k] == 0.f;
-        }
-        if (was_zero && !now_zero) list.push_back(int32_t(vtx));
-      }
+      float* rows[8];
+      for (int c = 0; c < 8; ++c) rows[c] = &adam_.grad[(size_t(b) * kBlockVerts + size_t(vid[c])) * size_t(F)];
+      // A vertex goes on the list when its gradient row stops being all zeros.
+      const uint32_t touched = feature_scatter_rows(rows, w, g, size_t(F));
+      for (int c = 0; c < 8; ++c)
+        if (touched >> c & 1) list.push_back(int32_t(size_t(b) * kBlockVerts + size_t(vid[c])));
     }
   }
 }
@@ -488,29 +486,8 @@ void BlockFeatures::adam_step(const AdamStep& step) {
 #pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < n_lists; ++j) {
     auto& list = adam_.touched_list[size_t(j)];
-    const size_t n_list = list.size();
-    for (size_t j = 0; j < n_list; ++j) {
-      const int32_t vtx = list[j];
-      if (j + 4 < n_list) {
-        const size_t f = size_t(list[j + 4]) * F;
-        for (size_t k = 0; k < F; k += 16) {
-          __builtin_prefetch(&value_[f + k], 1);
-          __builtin_prefetch(&adam_.m[f + k], 1);
-          __builtin_prefetch(&adam_.v[f + k], 1);
-          __builtin_prefetch(&adam_.grad[f + k], 1);
-        }
-      }
-      size_t k = 0;
-      for (; k + 4 <= F; k += 4) {
-        const size_t i = size_t(vtx) * F + k;
-        step.update4(&value_[i], &adam_.m[i], &adam_.v[i], &adam_.grad[i]);
-      }
-      for (; k < F; ++k) {
-        const size_t i = size_t(vtx) * F + k;
-        step.update(value_[i], adam_.m[i], adam_.v[i], adam_.grad[i]);
-        adam_.grad[i] = 0.f;
-      }
-    }
+    feature_adam_rows(value_.data(), adam_.m.data(), adam_.v.data(), adam_.grad.data(), list.data(), list.size(), F,
+                      step);
     list.clear();
   }
 }
