@@ -411,7 +411,19 @@ void BlockFeatures::scatter_gradients(const GradientSlabs& slabs, const std::vec
 #pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < n_slabs; ++j) {
     auto& list = adam_.touched_list[size_t(j)];
-    for (int32_t i = slabs.begin[size_t(j)]; i < slabs.begin[size_t(j) + 1]; ++i) {
+    const int32_t end = slabs.begin[size_t(j) + 1];
+    for (int32_t i = slabs.begin[size_t(j)]; i < end; ++i) {
+      if (i + 4 < end) {  // the gradient rows of the sample a few places ahead
+        const size_t q = size_t(slabs.samples[size_t(i + 4)]);
+        const Vec3i mq{micro[3 * q], micro[3 * q + 1], micro[3 * q + 2]};
+        const int32_t bq = fine_to_block_[linear_index(mq.x >> 2, mq.y >> 2, mq.z >> 2, fr)];
+        if (bq >= 0) {
+          int vq[8];
+          block_corners(mq, vq);
+          const float* base = &adam_.grad[size_t(bq) * kBlockVerts * size_t(F)];
+          for (int c = 0; c < 8; ++c) __builtin_prefetch(base + size_t(vq[c]) * size_t(F), 1);
+        }
+      }
       const size_t s = size_t(slabs.samples[size_t(i)]);
       const Vec3i m{micro[3 * s], micro[3 * s + 1], micro[3 * s + 2]};
       const int32_t b = fine_to_block_[linear_index(m.x >> 2, m.y >> 2, m.z >> 2, fr)];
