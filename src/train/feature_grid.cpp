@@ -365,6 +365,19 @@ inline void block_corners(const Vec3i& m, int vid[8]) {
 }
 }  // namespace
 
+void BlockFeatures::set_quantization(const std::vector<Int4Channel>& q) {
+  if (q.size() != size_t(channels_)) fail("block features: {} channel quantizers for {} channels", q.size(), channels_);
+  quant_ = q;
+  quant_scale_.clear();
+  quant_inv_scale_.clear();
+  quant_zero_point_.clear();
+  for (const Int4Channel& c : q) {
+    quant_scale_.push_back(c.scale);
+    quant_inv_scale_.push_back(c.inv_scale);
+    quant_zero_point_.push_back(float(c.zero_point));
+  }
+}
+
 void BlockFeatures::prefetch(const Vec3i& m) const {
   const int fr = micro_res_ / kMicroPerFine;
   const int32_t b = fine_to_block_[linear_index(m.x >> 2, m.y >> 2, m.z >> 2, fr)];
@@ -388,16 +401,13 @@ bool BlockFeatures::interpolate(const Vec3f& p, const Vec3i& m, float* out) cons
   float w[8];
   trilinear_weights(p.x - float(m.x), p.y - float(m.y), p.z - float(m.z), w);
   const float* base = &value_[size_t(b) * kBlockVerts * size_t(F)];
+  const float* rows[8];
+  for (int c = 0; c < 8; ++c) rows[c] = base + size_t(vid[c]) * size_t(F);
   if (quant_.empty()) {
-    const float* rows[8];
-    for (int c = 0; c < 8; ++c) rows[c] = base + size_t(vid[c]) * size_t(F);
     feature_blend_rows(rows, w, size_t(F), out);
-    return true;
-  }
-  std::fill(out, out + F, 0.f);
-  for (int c = 0; c < 8; ++c) {
-    const float* v = base + size_t(vid[c]) * size_t(F);
-    for (int k = 0; k < F; ++k) out[k] += w[c] * quant_[size_t(k)].fake(v[k]);
+  } else {
+    feature_blend_rows_fake_quant(rows, w, size_t(F), quant_scale_.data(), quant_inv_scale_.data(),
+                                  quant_zero_point_.data(), out);
   }
   return true;
 }

@@ -140,7 +140,7 @@ class BlockFeatures {
 
   // Quantization-aware reads: when enabled, every read goes through the INT4
   // quantizer of its channel.
-  void set_quantization(const std::vector<Int4Channel>& q) { quant_ = q; }
+  void set_quantization(const std::vector<Int4Channel>& q);
   void clear_quantization() { quant_.clear(); }
   bool quantized() const { return !quant_.empty(); }
   const std::vector<Int4Channel>& quantization() const { return quant_; }
@@ -175,6 +175,7 @@ class BlockFeatures {
   std::vector<int32_t> fine_to_block_;
   std::vector<float> value_;
   std::vector<Int4Channel> quant_;
+  std::vector<float> quant_scale_, quant_inv_scale_, quant_zero_point_;  // quant_ by field, for the kernel
   LazyAdamArray adam_;
 };
 

@@ -32,6 +32,28 @@ void BlendRows(const float* const rows[8], const float* w, size_t F, float* out)
   });
 }
 
+void BlendRowsFakeQuant(const float* const rows[8], const float* w, size_t F, const float* scale,
+                        const float* inv_scale, const float* zero_point, float* out) {
+  for_each_chunk(F, [&](auto d, size_t k) {
+    // Int4Channel::quantize and dequantize, operation by operation: the
+    // clamp keeps a NaN (no comparison holds), the 1.5 * 2^23 trick rounds
+    // half to even, a code not above 0 (a NaN too) is 0, and the code is an
+    // integer, so it needs no conversion.
+    const auto lo = hn::Set(d, -64.f), hi = hn::Set(d, 64.f), big = hn::Set(d, 12582912.f);
+    const auto zero = hn::Zero(d), top = hn::Set(d, 15.f);
+    const auto inv = hn::LoadU(d, inv_scale + k), zp = hn::LoadU(d, zero_point + k), sc = hn::LoadU(d, scale + k);
+    auto acc = hn::Zero(d);
+    for (int c = 0; c < 8; ++c) {
+      const auto p = hn::Mul(hn::LoadU(d, rows[c] + k), inv);
+      const auto t = hn::IfThenElse(hn::Lt(p, lo), lo, hn::IfThenElse(hn::Lt(hi, p), hi, p));
+      const auto v = hn::Add(hn::Sub(hn::Add(t, big), big), zp);
+      const auto code = hn::IfThenElse(hn::Ge(v, top), top, hn::IfThenElse(hn::Gt(v, zero), v, zero));
+      acc = hn::Add(acc, hn::Mul(hn::Set(d, w[c]), hn::Mul(hn::Sub(code, zp), sc)));
+    }
+    hn::StoreU(acc, d, out + k);
+  });
+}
+
 uint32_t ScatterRows(float* const grad[8], const float* w, const float* g, size_t F) {
   uint32_t touched = 0;
   for (int c = 0; c < 8; ++c) {
@@ -86,11 +108,17 @@ HWY_AFTER_NAMESPACE();
 namespace edrnr::train {
 
 HWY_EXPORT(BlendRows);
+HWY_EXPORT(BlendRowsFakeQuant);
 HWY_EXPORT(ScatterRows);
 HWY_EXPORT(AdamRows);
 
 void feature_blend_rows(const float* const rows[8], const float w[8], size_t F, float* out) {
   HWY_DYNAMIC_DISPATCH(BlendRows)(rows, w, F, out);
+}
+
+void feature_blend_rows_fake_quant(const float* const rows[8], const float w[8], size_t F, const float* scale,
+                                   const float* inv_scale, const float* zero_point, float* out) {
+  HWY_DYNAMIC_DISPATCH(BlendRowsFakeQuant)(rows, w, F, scale, inv_scale, zero_point, out);
 }
 
 uint32_t feature_scatter_rows(float* const grad[8], const float w[8], const float* g, size_t F) {

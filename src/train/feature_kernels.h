@@ -17,6 +17,12 @@ namespace edrnr::train {
 // (the sum starts from 0).
 void feature_blend_rows(const float* const rows[8], const float w[8], size_t F, float* out);
 
+// feature_blend_rows of the rows as the INT4 export stores them: each value
+// through its channel's Int4Channel::fake (quantize, then dequantize), given
+// as scale[k], inv_scale[k] and zero_point[k] (a float holding the integer).
+void feature_blend_rows_fake_quant(const float* const rows[8], const float w[8], size_t F, const float* scale,
+                                   const float* inv_scale, const float* zero_point, float* out);
+
 // For each c = 0..7: grad[c][k] += w[c] * g[k] for k < F. Returns a mask
 // with bit c set when row c was all zeros before and is not all zeros after
 // (the row has just been touched). Rows must not overlap.

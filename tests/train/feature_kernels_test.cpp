@@ -7,11 +7,13 @@
 #include <gtest/gtest.h>
 
 #include <bit>
+#include <cmath>
 #include <cstring>
 #include <random>
 #include <vector>
 
 #include "train/adam.h"
+#include "train/feature_grid.h"
 
 namespace edrnr::train {
 namespace {
@@ -45,6 +47,52 @@ TEST(FeatureKernels, BlendMatchesTheScalarSum) {
       for (int c = 0; c < 8; ++c)
         for (size_t k = 0; k < F; ++k) want[k] += wv[size_t(c)] * ptr[c][k];
       feature_blend_rows(ptr, wv.data(), F, got.data());
+      ASSERT_TRUE(same_bits(want, got)) << "F " << F << " trial " << trial;
+    }
+  }
+}
+
+TEST(FeatureKernels, FakeQuantBlendMatchesInt4ChannelFake) {
+  // Each value through its channel's quantize-dequantize, then blended: the
+  // scalar Int4Channel::fake for every channel, with values on rounding
+  // ties, far outside the range, and NaN among them.
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  for (size_t F : {1, 5, 16, 19}) {
+    std::vector<Int4Channel> q(F);
+    std::vector<float> scale(F), inv(F), zp(F);
+    for (size_t k = 0; k < F; ++k) {
+      q[k] = int4_channel_for_range(-0.5f * (1.f + u(rng)), 0.7f * (1.f + u(rng)));
+      scale[k] = q[k].scale, inv[k] = q[k].inv_scale, zp[k] = float(q[k].zero_point);
+    }
+    for (int trial = 0; trial < 100; ++trial) {
+      std::vector<std::vector<float>> rows(8, std::vector<float>(F));
+      const float* ptr[8];
+      for (int c = 0; c < 8; ++c) {
+        for (size_t k = 0; k < F; ++k) {
+          float& x = rows[size_t(c)][k];
+          switch (rng() % 6) {
+            case 0:
+              x = (float(int(rng() % 30) - 15) + 0.5f) * q[k].scale;
+              break;  // about a tie
+            case 1:
+              x = u(rng) * 1e6f;
+              break;  // clamped
+            case 2:
+              x = rng() % 50 == 0 ? std::nanf("") : -0.f;
+              break;
+            default:
+              x = u(rng);
+          }
+        }
+        ptr[c] = rows[size_t(c)].data();
+      }
+      float wv[8];
+      for (float& x : wv) x = u(rng);
+      std::vector<float> want(F, 0.f), got(F, 3.f);
+      for (int c = 0; c < 8; ++c)
+        for (size_t k = 0; k < F; ++k) want[k] += wv[c] * q[k].fake(ptr[c][k]);
+      feature_blend_rows_fake_quant(ptr, wv, F, scale.data(), inv.data(), zp.data(), got.data());
       ASSERT_TRUE(same_bits(want, got)) << "F " << F << " trial " << trial;
     }
   }
