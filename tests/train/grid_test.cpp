@@ -7,6 +7,7 @@
 #include <cmath>
 #include <vector>
 
+#include "core/error.h"
 #include "test_random.h"
 #include "train/feature_grid.h"
 #include "train/occupancy.h"
@@ -439,6 +440,15 @@ TEST(FeatureGrid, Int4FitSaturatesAnOutlierInsteadOfCoarseningEveryStep) {
   v.pop_back();
   const Int4Channel full = fit_int4_channel(v.data(), v.size(), 1);
   EXPECT_NEAR(full.scale, 2.f / 15.f, 0.02f * 2.f / 15.f);
+}
+
+TEST(FeatureGrid, QuantizersMustMatchTheChannels) {
+  std::vector<float> values(kBlockVerts * 2, 0.25f);
+  BlockFeatures b(32, 2, {0}, values);
+  EXPECT_THROW(b.set_quantization(std::vector<Int4Channel>(3)), Error);
+  EXPECT_FALSE(b.quantized());
+  b.set_quantization(std::vector<Int4Channel>(2));
+  EXPECT_TRUE(b.quantized());
 }
 
 TEST(FeatureGrid, QuantizedBlockGradientIsStraightThrough) {
