@@ -355,15 +355,16 @@ std::vector<Int4Channel> BlockFeatures::fit_quantization() const {
   return q;
 }
 
-namespace {
-// Vertex ids (x fastest in the 5^3 block) of the 8 corners of micro voxel m, dx fastest.
-inline void block_corners(const Vec3i& m, int vid[8]) {
-  const int lx = m.x & 3, ly = m.y & 3, lz = m.z & 3;
-  const int base = lx + kBlockVertsPerAxis * (ly + kBlockVertsPerAxis * lz);
-  const int off[8] = {0, 1, 5, 6, 25, 26, 30, 31};
-  for (int c = 0; c < 8; ++c) vid[c] = base + off[c];
+bool BlockFeatures::corner_vertices(const Vec3i& m, int32_t vtx[8]) const {
+  const int fr = micro_res_ / kMicroPerFine;
+  const int32_t b = fine_to_block_[linear_index(m.x >> 2, m.y >> 2, m.z >> 2, fr)];
+  if (b < 0) return false;
+  // Vertex ids in the 5^3 block (x fastest) of the corners, dx fastest.
+  const int base = (m.x & 3) + kBlockVertsPerAxis * ((m.y & 3) + kBlockVertsPerAxis * (m.z & 3));
+  constexpr int kOff[8] = {0, 1, 5, 6, 25, 26, 30, 31};
+  for (int c = 0; c < 8; ++c) vtx[c] = b * kBlockVerts + base + kOff[c];
+  return true;
 }
-}  // namespace
 
 void BlockFeatures::set_quantization(const std::vector<Int4Channel>& q) {
   if (q.size() != size_t(channels_)) fail("block features: {} channel quantizers for {} channels", q.size(), channels_);
@@ -379,30 +380,22 @@ void BlockFeatures::set_quantization(const std::vector<Int4Channel>& q) {
 }
 
 void BlockFeatures::prefetch(const Vec3i& m) const {
-  const int fr = micro_res_ / kMicroPerFine;
-  const int32_t b = fine_to_block_[linear_index(m.x >> 2, m.y >> 2, m.z >> 2, fr)];
-  if (b < 0) return;
-  int vid[8];
-  block_corners(m, vid);
-  const float* base = &value_[size_t(b) * kBlockVerts * size_t(channels_)];
-  for (int c = 0; c < 8; ++c) __builtin_prefetch(base + size_t(vid[c]) * size_t(channels_));
+  int32_t vtx[8];
+  if (!corner_vertices(m, vtx)) return;
+  for (int c = 0; c < 8; ++c) __builtin_prefetch(&value_[size_t(vtx[c]) * size_t(channels_)]);
 }
 
 bool BlockFeatures::interpolate(const Vec3f& p, const Vec3i& m, float* out) const {
   const int F = channels_;
-  const int fr = micro_res_ / kMicroPerFine;
-  const int32_t b = fine_to_block_[linear_index(m.x >> 2, m.y >> 2, m.z >> 2, fr)];
-  if (b < 0) {
+  int32_t vtx[8];
+  if (!corner_vertices(m, vtx)) {
     std::fill(out, out + F, 0.f);
     return false;
   }
-  int vid[8];
-  block_corners(m, vid);
   float w[8];
   trilinear_weights(p.x - float(m.x), p.y - float(m.y), p.z - float(m.z), w);
-  const float* base = &value_[size_t(b) * kBlockVerts * size_t(F)];
   const float* rows[8];
-  for (int c = 0; c < 8; ++c) rows[c] = base + size_t(vid[c]) * size_t(F);
+  for (int c = 0; c < 8; ++c) rows[c] = &value_[size_t(vtx[c]) * size_t(F)];
   if (quant_.empty()) {
     feature_blend_rows(rows, w, size_t(F), out);
   } else {
@@ -415,7 +408,6 @@ bool BlockFeatures::interpolate(const Vec3f& p, const Vec3i& m, float* out) cons
 void BlockFeatures::scatter_gradients(const GradientSlabs& slabs, const std::vector<float>& pos,
                                       const std::vector<int16_t>& micro, const std::vector<float>& d_feat) {
   const int F = channels_;
-  const int fr = micro_res_ / kMicroPerFine;
   if (slabs.slab_micro != kMicroPerFine) fail("block features: gradient slabs must be one fine voxel high");
   const int n_slabs = slabs.slabs();
 #pragma omp parallel for schedule(dynamic, 1)
@@ -423,32 +415,24 @@ void BlockFeatures::scatter_gradients(const GradientSlabs& slabs, const std::vec
     auto& list = adam_.touched_list[size_t(j)];
     const int32_t end = slabs.begin[size_t(j) + 1];
     for (int32_t i = slabs.begin[size_t(j)]; i < end; ++i) {
+      int32_t vtx[8];
       if (i + 4 < end) {  // the gradient rows of the sample a few places ahead
         const size_t q = size_t(slabs.samples[size_t(i + 4)]);
-        const Vec3i mq{micro[3 * q], micro[3 * q + 1], micro[3 * q + 2]};
-        const int32_t bq = fine_to_block_[linear_index(mq.x >> 2, mq.y >> 2, mq.z >> 2, fr)];
-        if (bq >= 0) {
-          int vq[8];
-          block_corners(mq, vq);
-          const float* base = &adam_.grad[size_t(bq) * kBlockVerts * size_t(F)];
-          for (int c = 0; c < 8; ++c) __builtin_prefetch(base + size_t(vq[c]) * size_t(F), 1);
-        }
+        if (corner_vertices({micro[3 * q], micro[3 * q + 1], micro[3 * q + 2]}, vtx))
+          for (int c = 0; c < 8; ++c) __builtin_prefetch(&adam_.grad[size_t(vtx[c]) * size_t(F)], 1);
       }
       const size_t s = size_t(slabs.samples[size_t(i)]);
       const Vec3i m{micro[3 * s], micro[3 * s + 1], micro[3 * s + 2]};
-      const int32_t b = fine_to_block_[linear_index(m.x >> 2, m.y >> 2, m.z >> 2, fr)];
-      if (b < 0) continue;
-      int vid[8];
-      block_corners(m, vid);
+      if (!corner_vertices(m, vtx)) continue;
       float w[8];
       trilinear_weights(pos[3 * s] - float(m.x), pos[3 * s + 1] - float(m.y), pos[3 * s + 2] - float(m.z), w);
       const float* g = &d_feat[s * size_t(F)];
       float* rows[8];
-      for (int c = 0; c < 8; ++c) rows[c] = &adam_.grad[(size_t(b) * kBlockVerts + size_t(vid[c])) * size_t(F)];
+      for (int c = 0; c < 8; ++c) rows[c] = &adam_.grad[size_t(vtx[c]) * size_t(F)];
       // A vertex goes on the list when its gradient row stops being all zeros.
       const uint32_t touched = feature_scatter_rows(rows, w, g, size_t(F));
       for (int c = 0; c < 8; ++c)
-        if (touched >> c & 1) list.push_back(int32_t(size_t(b) * kBlockVerts + size_t(vid[c])));
+        if (touched >> c & 1) list.push_back(vtx[c]);
     }
   }
 }

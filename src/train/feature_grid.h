@@ -166,6 +166,9 @@ class BlockFeatures {
   void adam_step(const AdamStep& step);
 
  private:
+  // The vertices (block * 125 + id in the block) of micro voxel m's 8
+  // corners, dx fastest; false when m's fine voxel has no block.
+  bool corner_vertices(const Vec3i& m, int32_t vtx[8]) const;
   // Calls pull(u) with the values of each of vertex vtx's TV neighbours.
   template <class Pull>
   void for_each_neighbour(int32_t vtx, Pull pull) const;
