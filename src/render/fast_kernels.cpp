@@ -73,8 +73,10 @@ struct Scratch {
   // Int8: the direction part of the colour net's first layer per ray of a
   // segment, in accumulator units: output o of slot j at dir_q[o * kDirRow + j].
   alignas(64) float dir_q[kFastMaxWidth * kDirRow];
-  // Int8 byte form: a layer's inputs plus 128, 4 rows per word.
+  // Int8 byte form: a layer's inputs plus 128, 4 rows per word (xq2: the
+  // next layer's, written by the layer before it).
   alignas(64) int32_t xq[(kFastMaxWidth / 4) * kCap];
+  alignas(64) int32_t xq2[(kFastMaxWidth / 4) * kCap];
 };
 
 // What a layer does to its sums before they are stored: nothing (mult null,
@@ -131,38 +133,59 @@ void Dense(DT d, size_t N, const float* X, int in, int i0, int i1, const float* 
 }
 
 #if HWY_TARGET == HWY_AVX3_DL
-// acc plus, per 32-bit lane, the 4 products of u's unsigned bytes and w's
-// signed bytes (VPDPBUSD of AVX-512 VNNI; the model has its byte form only
+// acc plus, per 32-bit lane, the 4 products of u's unsigned bytes and the
+// signed bytes of the word *w, broadcast to every lane (VPDPBUSD of AVX-512
+// VNNI with a broadcast memory operand; the model has its byte form only
 // where the CPU has that instruction, see FastModel::quads).
 template <class V>
-HWY_INLINE V DotBytes(V acc, V u, V w) {
+HWY_INLINE V DotBytes(V acc, V u, const int32_t* w) {
   auto r = acc.raw;
   if constexpr (sizeof(r) == 64)
-    asm("vpdpbusd %2, %1, %0" : "+v"(r) : "v"(u.raw), "v"(w.raw));
+    asm("vpdpbusd %2%{1to16%}, %1, %0" : "+v"(r) : "v"(u.raw), "m"(*w));
   else
-    asm("%{evex%} vpdpbusd %2, %1, %0" : "+v"(r) : "v"(u.raw), "v"(w.raw));
+    asm("vpdpbusd %2%{1to8%}, %1, %0" : "+v"(r) : "v"(u.raw), "m"(*w));
   acc.raw = r;
   return acc;
 }
 constexpr bool kHaveDotBytes = true;
 
-// DenseBlock in the byte form: ACC rows [o, o + NB) = epilogue(bias + W X)
-// from the inputs in xq (4 per word, plus 128) and the weight words wq,
-// whose bias words bq take the 128 back out; row r at ACC + r * stride
-// (N when 0). Every sum is an exact integer in both forms, so the results
-// are those of DenseBlock<NB, true>.
+// round(v) as int32 lanes, v already within the int32 range (the conversion
+// rounds to nearest even, as hn::Round).
+template <class DT>
+HWY_INLINE hn::Vec<hn::RebindToSigned<DT>> RoundToInt(DT d, hn::Vec<DT> v) {
+  hn::Vec<hn::RebindToSigned<DT>> r = hn::Zero(hn::RebindToSigned<DT>());
+  if constexpr (sizeof(v.raw) == 64)
+    r.raw = _mm512_cvtps_epi32(v.raw);
+  else if constexpr (sizeof(v.raw) == 32)
+    r.raw = _mm256_cvtps_epi32(v.raw);
+  else
+    r = hn::NearestInt(v);
+  (void)d;
+  return r;
+}
+
+// The sums bias + W X of outputs [o, o + NB) in the byte form: the inputs in
+// xq (4 per word, plus 128), the weight words wq, the bias words bq (which
+// take the 128 back out). Every sum is an exact integer, as in Dense<true>.
+template <int NB, class DI>
+HWY_INLINE void ByteSums(DI di, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq, int o,
+                         hn::Vec<DI>* acc) {
+  for (int k = 0; k < NB; ++k) acc[k] = hn::Set(di, bq[o + k]);
+  for (int j = 0; j < words; ++j) {
+    const auto u = hn::Load(di, xq + size_t(j) * N);
+    for (int k = 0; k < NB; ++k) acc[k] = DotBytes(acc[k], u, wq + size_t(o + k) * size_t(words) + size_t(j));
+  }
+}
+
+// DenseBlock in the byte form: ACC rows [o, o + NB) = epilogue(bias + W X),
+// row r at ACC + r * stride (N when 0): the results of DenseBlock<NB, true>.
 template <int NB, class DT>
 HWY_INLINE void DenseBytesBlock(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq,
                                 int o, float* ACC, const Epilogue& e, size_t stride = 0) {
   if (stride == 0) stride = N;
   const hn::RebindToSigned<DT> di;
   hn::Vec<decltype(di)> acc[NB];
-  for (int k = 0; k < NB; ++k) acc[k] = hn::Set(di, bq[o + k]);
-  for (int j = 0; j < words; ++j) {
-    const auto u = hn::Load(di, xq + size_t(j) * N);
-    for (int k = 0; k < NB; ++k)
-      acc[k] = DotBytes(acc[k], u, hn::Set(di, wq[size_t(o + k) * size_t(words) + size_t(j)]));
-  }
+  ByteSums<NB>(di, N, xq, words, wq, bq, o, acc);
   for (int k = 0; k < NB; ++k) {
     hn::Vec<DT> v = hn::ConvertTo(d, acc[k]);
     if (e.mult) {
@@ -173,21 +196,56 @@ HWY_INLINE void DenseBytesBlock(DT d, size_t N, const int32_t* xq, int words, co
   }
 }
 
-// Dense<true> over inputs [0, L.q_in) in the byte form (q: the MLP's words).
-template <class DT>
-void DenseBytes(DT d, size_t N, const float* X, const FastLayer& L, const int32_t* q, float* ACC, const Epilogue& e,
-                int32_t* xq) {
+// A hidden layer's outputs [o, o + NB) (NB a multiple of 4) straight into
+// the next layer's byte form: clamp(round(mult (sum + dir)), 0, 127) plus
+// 128, 4 outputs per word of xq_out. dir (null: none): the colour net's
+// direction terms, output r's of the lanes' slots at dir[r * kDirRow]
+// picked by `lanes`. The values are those of DenseBytesBlock's epilogue (the
+// bounds are integers, so clamping before or after rounding is the same)
+// and of the next layer's packing (DenseBytes).
+template <int NB, class DT, class Idx>
+HWY_INLINE void DenseBytesToBytes(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq,
+                                  int o, const float* mult, const float* dir, Idx lanes, int32_t* xq_out) {
+  static_assert(NB % 4 == 0, "whole words");
   const hn::RebindToSigned<DT> di;
-  const int words = (L.q_in + 3) / 4;
+  hn::Vec<decltype(di)> acc[NB];
+  ByteSums<NB>(di, N, xq, words, wq, bq, o, acc);
+  const hn::Vec<DT> lo = hn::Zero(d), hi = hn::Set(d, 127.f);
+  for (int g = 0; g < NB; g += 4) {
+    hn::Vec<decltype(di)> word = hn::Set(di, int32_t(0x80808080u));  // the 128 of every byte (values below 128)
+    for (int b = 0; b < 4; ++b) {
+      const int k = g + b;
+      hn::Vec<DT> v = hn::ConvertTo(d, acc[k]);
+      if (dir) v = hn::Add(v, hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o + k) * kDirRow), lanes));
+      v = hn::Min(hn::Max(hn::Mul(v, hn::Set(d, mult[o + k])), lo), hi);
+      word = hn::Or(word, hn::ShiftLeftSame(RoundToInt(d, v), 8 * b));
+    }
+    hn::Store(word, di, xq_out + size_t(o + g) / 4 * N);
+  }
+}
+
+// The byte form of input rows [0, rows) of X (integers in [-128, 127]): 4
+// per word, plus 128: ceil(rows / 4) rows of N words.
+template <class DT>
+void PackBytes(DT d, size_t N, const float* X, int rows, int32_t* xq) {
+  const hn::RebindToSigned<DT> di;
   const auto offset = hn::Set(di, 128);
-  for (int j = 0; j < words; ++j) {
+  for (int j = 0; 4 * j < rows; ++j) {
     auto u = hn::Zero(di);
-    for (int k = 0; k < 4 && 4 * j + k < L.q_in; ++k) {
+    for (int k = 0; k < 4 && 4 * j + k < rows; ++k) {
       const auto x = hn::Add(hn::ConvertTo(di, hn::Load(d, X + size_t(4 * j + k) * N)), offset);
       u = hn::Or(u, hn::ShiftLeftSame(x, 8 * k));
     }
     hn::Store(u, di, xq + size_t(j) * N);
   }
+}
+
+// Dense<true> over inputs [0, L.q_in), already in the byte form in xq (q:
+// the MLP's words), into rows of ACC.
+template <class DT>
+void DenseBytes(DT d, size_t N, const int32_t* xq, const FastLayer& L, const int32_t* q, float* ACC,
+                const Epilogue& e) {
+  const int words = (L.q_in + 3) / 4;
   const int32_t* wq = q + L.wq;
   const int32_t* bq = q + L.bq;
   int o = 0;
@@ -197,6 +255,20 @@ void DenseBytes(DT d, size_t N, const float* X, const FastLayer& L, const int32_
     o += 4;
   }
   for (; o < L.out; ++o) DenseBytesBlock<1>(d, N, xq, words, wq, bq, o, ACC, e);
+}
+
+// A hidden layer (L.out a multiple of 4) from the byte form in xq to the
+// next layer's byte form in xq_out (DenseBytesToBytes), with the direction
+// terms dir picked by lanes when dir is not null.
+template <class DT, class Idx>
+void DenseBytesHidden(DT d, size_t N, const int32_t* xq, const FastLayer& L, const int32_t* q, const float* mult,
+                      const float* dir, Idx lanes, int32_t* xq_out) {
+  const int words = (L.q_in + 3) / 4;
+  const int32_t* wq = q + L.wq;
+  const int32_t* bq = q + L.bq;
+  int o = 0;
+  for (; o + 8 <= L.out; o += 8) DenseBytesToBytes<8>(d, N, xq, words, wq, bq, o, mult, dir, lanes, xq_out);
+  for (; o < L.out; o += 4) DenseBytesToBytes<4>(d, N, xq, words, wq, bq, o, mult, dir, lanes, xq_out);
 }
 
 // DirectionParts' sums in the byte form: output o of the vector's slots at
@@ -220,7 +292,12 @@ void DirectionBytes(DT d, size_t N, const int32_t* xq, int words, const int32_t*
 #else
 constexpr bool kHaveDotBytes = false;
 template <class DT>
-void DenseBytes(DT, size_t, const float*, const FastLayer&, const int32_t*, float*, const Epilogue&, int32_t*) {}
+void PackBytes(DT, size_t, const float*, int, int32_t*) {}
+template <class DT>
+void DenseBytes(DT, size_t, const int32_t*, const FastLayer&, const int32_t*, float*, const Epilogue&) {}
+template <class DT, class Idx>
+void DenseBytesHidden(DT, size_t, const int32_t*, const FastLayer&, const int32_t*, const float*, const float*, Idx,
+                      int32_t*) {}
 template <class DT>
 void DirectionBytes(DT, size_t, const int32_t*, int, const int32_t*, const int32_t*, int, float, float*) {}
 #endif
@@ -340,14 +417,66 @@ void Requantize(DT d, size_t N, float* rows, int count, const float* mult, bool 
   }
 }
 
+// The chip's arithmetic in the byte form (RunNet<true> with q): each
+// layer's inputs packed 4 to a word (PackBytes), and a hidden layer whose
+// outputs are all the next layer's byte-form inputs writes them packed
+// (DenseBytesHidden) instead of as rows of floats to be packed again. xq,
+// xq_next: scratch for the packed inputs. The results are RunNet's.
+template <class DT>
+void RunNetBytes(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, const int32_t* q, const float* in,
+                 float* a, float* last, int split, const float* dir_q, const int32_t* slots, int32_t* xq,
+                 int32_t* xq_next) {
+  const hn::RebindToSigned<DT> di;
+  const auto lanes = hn::IndicesFromVec(d, split >= 0 ? hn::Load(di, slots) : hn::Zero(di));
+  const float* x = in;
+  bool packed = false;  // the layer's inputs are in xq already
+  for (size_t l = 0; l < net.size(); ++l) {
+    const FastLayer& L = net[l];
+    const bool hidden = l + 1 < net.size();
+    if (!packed) PackBytes(d, N, x, L.q_in, xq);
+    const float* dir = l == 0 && split >= 0 ? dir_q : nullptr;
+    if (hidden && L.out % 4 == 0 && net[l + 1].q_in == L.out) {
+      DenseBytesHidden(d, N, xq, L, q, p + L.m, dir, lanes, xq_next);
+      std::swap(xq, xq_next);
+      packed = true;
+      continue;
+    }
+    float* y = hidden ? a : last;  // x is packed already: a may be overwritten
+    Epilogue e;
+    e.mult = p + L.m;
+    e.lo = hidden ? 0.f : -32768.f;
+    e.hi = hidden ? 127.f : 32767.f;
+    if (dir) {
+      DenseBytes(d, N, xq, L, q, y, Epilogue());
+      for (int o = 0; o < L.out; ++o) {
+        float* r = y + size_t(o) * N;
+        const hn::Vec<DT> t = hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o) * kDirRow), lanes);
+        const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), t), hn::Set(d, e.mult[o])));
+        hn::Store(hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi)), d, r);
+      }
+    } else {
+      DenseBytes(d, N, xq, L, q, y, e);
+    }
+    x = y;
+    packed = false;
+  }
+}
+
 // A net's layers from `in` into `last` (rows of the last layer's output),
 // hidden layers through a and b. Int8 with split >= 0: the first layer's
 // products of the inputs from split on (the direction) are not summed here but
 // read from dir_q (DirectionParts) at each sample's slot. Int8 with q: the
-// layers' sums in the byte form (DenseBytes, scratch xq).
+// byte form (RunNetBytes, scratch xq and xq_next).
 template <bool kInt8, class DT>
 void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, const int32_t* q, const float* in,
-            float* a, float* b, float* last, int split, const float* dir_q, const int32_t* slots, int32_t* xq) {
+            float* a, float* b, float* last, int split, const float* dir_q, const int32_t* slots, int32_t* xq,
+            int32_t* xq_next) {
+  if constexpr (kInt8 && kHaveDotBytes) {
+    if (q) {
+      RunNetBytes(d, N, net, p, q, in, a, last, split, dir_q, slots, xq, xq_next);
+      return;
+    }
+  }
   // Int8, split >= 0: dir_q points at the chunk's first slot, slots holds the
   // lanes' slots relative to it (each below the lane count).
   const float* x = in;
@@ -369,20 +498,15 @@ void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, c
       // The inputs before `split` here; those from it on (the direction)
       // were summed per ray (DirectionParts): added by the sample's slot,
       // then the epilogue.
-      if (kHaveDotBytes && q)
-        DenseBytes(d, N, x, L, q, y, Epilogue(), xq);
-      else
-        Dense<true>(d, N, x, L.in, 0, split, p + L.w, p + L.b, L.out, y);
+      Dense<true>(d, N, x, L.in, 0, split, p + L.w, p + L.b, L.out, y);
       const hn::RebindToSigned<DT> di;
       const auto lanes = hn::IndicesFromVec(d, hn::Load(di, slots));
       for (int o = 0; o < L.out; ++o) {
         float* r = y + size_t(o) * N;
-        const hn::Vec<DT> q = hn::TableLookupLanes(hn::LoadU(d, dir_q + size_t(o) * kDirRow), lanes);
-        const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), q), hn::Set(d, e.mult[o])));
+        const hn::Vec<DT> t = hn::TableLookupLanes(hn::LoadU(d, dir_q + size_t(o) * kDirRow), lanes);
+        const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), t), hn::Set(d, e.mult[o])));
         hn::Store(hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi)), d, r);
       }
-    } else if (kInt8 && kHaveDotBytes && q) {
-      DenseBytes(d, N, x, L, q, y, e, xq);
     } else {
       Dense<kInt8>(d, N, x, L.in, 0, L.in, p + L.w, p + L.b, L.out, y, e);
     }
@@ -459,7 +583,7 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
   }
 
   // Density net: its G outputs land in the first rows of the colour input.
-  RunNet<kInt8>(d, N, fm.density, p, q, s.a, s.a, s.b, s.cin, -1, nullptr, nullptr, s.xq);
+  RunNet<kInt8>(d, N, fm.density, p, q, s.a, s.a, s.b, s.cin, -1, nullptr, nullptr, s.xq, s.xq2);
   hn::Vec<DT> raw = hn::Load(d, s.cin);
   if (kInt8) {
     raw = hn::Mul(raw, hn::Set(d, 1.f / 256.f));
@@ -474,7 +598,7 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
   // Float: the rays' direction inputs after the density outputs (Int8: in dir_q).
   if (!kInt8) GatherDirections(d, N, dir, ray_stride, s.ray, G, D, s.cin);
   RunNet<kInt8>(d, N, fm.color, p, q, s.cin, s.a, s.b, s.rgb, kInt8 && D > 0 ? G : -1, s.dir_q + s.slot_base, s.slot,
-                s.xq);
+                s.xq, s.xq2);
   for (int c = 0; c < 3; ++c) {
     hn::Vec<DT> v = hn::Load(d, s.rgb + size_t(c) * N);
     if (kInt8) v = hn::Mul(v, hn::Set(d, 1.f / 256.f));
