@@ -240,6 +240,23 @@ void PackBytes(DT d, size_t N, const float* X, int rows, int32_t* xq) {
   }
 }
 
+// PackBytes of the rows clamp(round(X * m), -128, 127) (Requantize's
+// values, which are not stored), rows [0, rows).
+template <class DT>
+void PackBytesScaled(DT d, size_t N, const float* X, int rows, float m, int32_t* xq) {
+  const hn::RebindToSigned<DT> di;
+  const auto offset = hn::Set(di, 128);
+  const hn::Vec<DT> mv = hn::Set(d, m), lo = hn::Set(d, -128.f), hi = hn::Set(d, 127.f);
+  for (int j = 0; 4 * j < rows; ++j) {
+    auto u = hn::Zero(di);
+    for (int k = 0; k < 4 && 4 * j + k < rows; ++k) {
+      const hn::Vec<DT> v = hn::Min(hn::Max(hn::Mul(hn::Load(d, X + size_t(4 * j + k) * N), mv), lo), hi);
+      u = hn::Or(u, hn::ShiftLeftSame(hn::Add(RoundToInt(d, v), offset), 8 * k));
+    }
+    hn::Store(u, di, xq + size_t(j) * N);
+  }
+}
+
 // Dense<true> over inputs [0, L.q_in), already in the byte form in xq (q:
 // the MLP's words), into rows of ACC.
 template <class DT>
@@ -292,7 +309,13 @@ void DirectionBytes(DT d, size_t N, const int32_t* xq, int words, const int32_t*
 #else
 constexpr bool kHaveDotBytes = false;
 template <class DT>
+HWY_INLINE hn::Vec<hn::RebindToSigned<DT>> RoundToInt(DT, hn::Vec<DT> v) {
+  return hn::NearestInt(v);
+}
+template <class DT>
 void PackBytes(DT, size_t, const float*, int, int32_t*) {}
+template <class DT>
+void PackBytesScaled(DT, size_t, const float*, int, float, int32_t*) {}
 template <class DT>
 void DenseBytes(DT, size_t, const int32_t*, const FastLayer&, const int32_t*, float*, const Epilogue&) {}
 template <class DT, class Idx>
@@ -302,11 +325,33 @@ template <class DT>
 void DirectionBytes(DT, size_t, const int32_t*, int, const int32_t*, const int32_t*, int, float, float*) {}
 #endif
 
+// The low 4 bits of each lane of u (mask: 15 in every lane) as a float. On
+// AVX-512 a lane permutation of the table 0, 1, ..., 15, which reads only
+// those bits; elsewhere a mask and a conversion. The same values.
+template <class DT, class VU>
+HWY_INLINE hn::Vec<DT> CodeValue(DT d, VU u, VU mask) {
+#if HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
+  hn::Vec<DT> r = hn::Zero(d);
+  if constexpr (sizeof(r.raw) == 64) {
+    const __m512 table = _mm512_setr_ps(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    r.raw = _mm512_permutexvar_ps(u.raw, table);
+    return r;
+  } else if constexpr (sizeof(r.raw) == 32) {
+    const __m256 lo = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7), hi = _mm256_setr_ps(8, 9, 10, 11, 12, 13, 14, 15);
+    r.raw = _mm256_permutex2var_ps(lo, u.raw, hi);
+    return r;
+  }
+#endif
+  return hn::ConvertTo(d, hn::BitCast(hn::RebindToSigned<DT>(), hn::And(u, mask)));
+}
+
 // Features of the chunk's samples from INT4 codes, 8 channels per 32-bit
 // word (F a multiple of 8), into rows of X: float values (Float) or the
 // density net's INT8 inputs (Int8, feature_in: per-channel multipliers).
+// Int8 with xq: those inputs in the byte form instead (PackBytes' words).
 template <bool kInt8, class DT>
-void InterpolateQ4(DT d, size_t N, const FastModel& fm, Scratch& s, const float* feature_in, float* X) {
+void InterpolateQ4(DT d, size_t N, const FastModel& fm, Scratch& s, const float* feature_in, float* X,
+                   int32_t* xq = nullptr) {
   const hn::RebindToUnsigned<DT> du;
   const hn::RebindToSigned<DT> di;
   const hn::Vec<DT> one = hn::Set(d, 1.f);
@@ -359,13 +404,28 @@ void InterpolateQ4(DT d, size_t N, const FastModel& fm, Scratch& s, const float*
     for (int j = 0; j < 8; ++j) {
       const auto word = hn::Load(du, words + size_t(j) * N);
       for (int k = 0; k < 8; ++k) {
-        const hn::Vec<DT> code = hn::ConvertTo(d, hn::BitCast(di, hn::And(hn::ShiftRightSame(word, 4 * k), mask)));
+        const hn::Vec<DT> code = CodeValue(d, k == 0 ? word : hn::ShiftRightSame(word, 4 * k), mask);
         if (kInt8) {
           acc[k] = hn::MulAdd(w[j], code, acc[k]);
         } else {  // the reference: (code - zero point) * scale, weighted, added in corner order
           acc[k] = hn::Add(acc[k], hn::Mul(w[j], hn::Mul(hn::Sub(code, zp[k]), scale[k])));
         }
       }
+    }
+    if (kInt8 && xq) {
+      // Clamped, then rounded (the bounds are integers: the same values),
+      // plus 128, 4 channels per word.
+      for (int h = 0; h < 2; ++h) {
+        auto word = hn::Zero(di);
+        for (int b = 0; b < 4; ++b) {
+          const int k = 4 * h + b;
+          hn::Vec<DT> v = hn::Mul(hn::Sub(acc[k], zp[k]), hn::Set(d, feature_in[c0 + k]));
+          v = hn::Min(hn::Max(v, hn::Set(d, -128.f)), hn::Set(d, 127.f));
+          word = hn::Or(word, hn::ShiftLeftSame(hn::Add(RoundToInt(d, v), hn::Set(di, 128)), 8 * b));
+        }
+        hn::Store(word, di, xq + size_t(c0 / 4 + h) * N);
+      }
+      continue;
     }
     for (int k = 0; k < 8; ++k) {
       hn::Vec<DT> v = acc[k];
@@ -421,15 +481,16 @@ void Requantize(DT d, size_t N, float* rows, int count, const float* mult, bool 
 // layer's inputs packed 4 to a word (PackBytes), and a hidden layer whose
 // outputs are all the next layer's byte-form inputs writes them packed
 // (DenseBytesHidden) instead of as rows of floats to be packed again. xq,
-// xq_next: scratch for the packed inputs. The results are RunNet's.
+// xq_next: scratch for the packed inputs (in_packed: xq holds the first
+// layer's already, and `in` is not read). The results are RunNet's.
 template <class DT>
 void RunNetBytes(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, const int32_t* q, const float* in,
                  float* a, float* last, int split, const float* dir_q, const int32_t* slots, int32_t* xq,
-                 int32_t* xq_next) {
+                 int32_t* xq_next, bool in_packed) {
   const hn::RebindToSigned<DT> di;
   const auto lanes = hn::IndicesFromVec(d, split >= 0 ? hn::Load(di, slots) : hn::Zero(di));
   const float* x = in;
-  bool packed = false;  // the layer's inputs are in xq already
+  bool packed = in_packed;  // the layer's inputs are in xq already
   for (size_t l = 0; l < net.size(); ++l) {
     const FastLayer& L = net[l];
     const bool hidden = l + 1 < net.size();
@@ -466,14 +527,15 @@ void RunNetBytes(DT d, size_t N, const std::vector<FastLayer>& net, const float*
 // hidden layers through a and b. Int8 with split >= 0: the first layer's
 // products of the inputs from split on (the direction) are not summed here but
 // read from dir_q (DirectionParts) at each sample's slot. Int8 with q: the
-// byte form (RunNetBytes, scratch xq and xq_next).
+// byte form (RunNetBytes, scratch xq and xq_next; in_packed: the inputs
+// are in xq already).
 template <bool kInt8, class DT>
 void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, const int32_t* q, const float* in,
             float* a, float* b, float* last, int split, const float* dir_q, const int32_t* slots, int32_t* xq,
-            int32_t* xq_next) {
+            int32_t* xq_next, bool in_packed = false) {
   if constexpr (kInt8 && kHaveDotBytes) {
     if (q) {
-      RunNetBytes(d, N, net, p, q, in, a, last, split, dir_q, slots, xq, xq_next);
+      RunNetBytes(d, N, net, p, q, in, a, last, split, dir_q, slots, xq, xq_next, in_packed);
       return;
     }
   }
@@ -570,8 +632,12 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
   Clock::time_point t0;
   if (seconds) t0 = Clock::now();
   const int F = fm.feature_channels, G = fm.geo_width, D = fm.dir_dims;
+  // Int8 in the byte form: the nets' first inputs are packed as they are made.
+  const bool bytes = kInt8 && kHaveDotBytes && q != nullptr;
+  bool features_packed = false;
   if (fm.form.quantized_features && F % 8 == 0 && fm.model->features_q4.size() < (size_t(1) << 31)) {
-    InterpolateQ4<kInt8>(d, N, fm, s, p + fm.feature_in, s.a);
+    InterpolateQ4<kInt8>(d, N, fm, s, p + fm.feature_in, s.a, bytes ? s.xq : nullptr);
+    features_packed = bytes;
   } else {
     InterpolateScalar(N, fm, s, s.a);
     if (kInt8) Requantize(d, N, s.a, F, p + fm.feature_in, true, -128.f, 127.f);
@@ -583,11 +649,14 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
   }
 
   // Density net: its G outputs land in the first rows of the colour input.
-  RunNet<kInt8>(d, N, fm.density, p, q, s.a, s.a, s.b, s.cin, -1, nullptr, nullptr, s.xq, s.xq2);
+  RunNet<kInt8>(d, N, fm.density, p, q, s.a, s.a, s.b, s.cin, -1, nullptr, nullptr, s.xq, s.xq2, features_packed);
   hn::Vec<DT> raw = hn::Load(d, s.cin);
   if (kInt8) {
     raw = hn::Mul(raw, hn::Set(d, 1.f / 256.f));
-    Requantize(d, N, s.cin, G, p + fm.geo_in, false, -128.f, 127.f);
+    if (bytes)  // the colour net's first inputs, packed
+      PackBytesScaled(d, N, s.cin, G, p[fm.geo_in], s.xq);
+    else
+      Requantize(d, N, s.cin, G, p + fm.geo_in, false, -128.f, 127.f);
   }
   const hn::Vec<DT> sigma = hn::Exp(d, hn::Min(hn::Max(raw, hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
   const hn::Vec<DT> tau = hn::Mul(sigma, hn::Set(d, delta));
@@ -598,7 +667,7 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
   // Float: the rays' direction inputs after the density outputs (Int8: in dir_q).
   if (!kInt8) GatherDirections(d, N, dir, ray_stride, s.ray, G, D, s.cin);
   RunNet<kInt8>(d, N, fm.color, p, q, s.cin, s.a, s.b, s.rgb, kInt8 && D > 0 ? G : -1, s.dir_q + s.slot_base, s.slot,
-                s.xq, s.xq2);
+                s.xq, s.xq2, bytes);
   for (int c = 0; c < 3; ++c) {
     hn::Vec<DT> v = hn::Load(d, s.rgb + size_t(c) * N);
     if (kInt8) v = hn::Mul(v, hn::Set(d, 1.f / 256.f));
