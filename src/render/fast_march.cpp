@@ -90,17 +90,23 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
   }
 
   const Bitmap3& micro = model.occupancy[int(Tier::Micro)];
-  fine_words.assign(2 * n, 0);
+  fine_words.assign(kCellWords * n, 0);
+  const int per_coarse = res / model.coarse_res();
   for (int fz = 0; fz < res; ++fz)
     for (int fy = 0; fy < res; ++fy)
       for (int fx = 0; fx < res; ++fx) {
         const size_t f = size_t(fx) + R * (size_t(fy) + R * size_t(fz));
+        uint32_t* cell = fine_words.data() + kCellWords * f;
+        cell[kCellBlock] = cell[kCellMlp] = uint32_t(-1);
         if (distance[f] != 0) continue;
         uint64_t m = 0;
         for (int i = 0; i < 64; ++i)
           if (micro.get(4 * fx + (i & 3), 4 * fy + ((i >> 2) & 3), 4 * fz + (i >> 4))) m |= uint64_t(1) << i;
-        fine_words[2 * f] = uint32_t(m);
-        fine_words[2 * f + 1] = uint32_t(m >> 32);
+        cell[0] = uint32_t(m);
+        cell[1] = uint32_t(m >> 32);
+        cell[kCellBlock] = uint32_t(model.fine_to_block[linear_index(fx, fy, fz, res)]);
+        cell[kCellMlp] = uint32_t(
+            model.coarse_to_mlp[linear_index(fx / per_coarse, fy / per_coarse, fz / per_coarse, model.coarse_res())]);
       }
 
   // The micro gaps. Near the object (r <= kExactReach) only the shell of fine voxels
@@ -142,7 +148,8 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
             for (int dx = std::max(-r, -fx); dx <= std::min(r, res - 1 - fx); ++dx) {
               const size_t gi = size_t(fx + dx) + R * (size_t(fy + dy) + R * size_t(fz + dz));
               if (distance[gi] != 0) continue;  // also every voxel inside the shell
-              const uint64_t m = uint64_t(fine_words[2 * gi]) | (uint64_t(fine_words[2 * gi + 1]) << 32);
+              const uint64_t m =
+                  uint64_t(fine_words[kCellWords * gi]) | (uint64_t(fine_words[kCellWords * gi + 1]) << 32);
               const uint64_t* nm = near[kind_of(dx, r) + 3 * kind_of(dy, r) + 9 * kind_of(dz, r)];
               for (int x = 0; x < best; ++x)
                 if (m & nm[x]) {

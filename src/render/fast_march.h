@@ -45,10 +45,15 @@ struct FastSkipGrid {
   // Per fine voxel: 0: occupied; r: every fine voxel within r - 1 is empty.
   // Followed by 3 bytes of padding, so that a 32-bit read at any voxel stays inside.
   std::vector<uint8_t> distance;
-  // Per fine voxel f (linear index x + res (y + res z)) two 32-bit words:
-  // bit lx + 4 ly + 16 (lz & 1) of word 2 f + (lz >> 1) is set iff micro
-  // voxel (lx, ly, lz) of it is occupied (the 64-bit mask of its 4x4x4 micro
-  // voxels, low half first).
+  // Per fine voxel f (linear index x + res (y + res z)) kCellWords 32-bit
+  // words, all in one 16-byte run: bit lx + 4 ly + 16 (lz & 1) of word
+  // kCellWords f + (lz >> 1) is set iff micro voxel (lx, ly, lz) of it is
+  // occupied (the 64-bit mask of its 4x4x4 micro voxels, low half first);
+  // word kCellWords f + kCellBlock: its feature block (model.fine_to_block,
+  // as int32), + kCellMlp: its coarse voxel's MLP (model.coarse_to_mlp), both
+  // -1 for an empty fine voxel. A sample's block and MLP then come from the
+  // cache line the occupancy test read.
+  static constexpr int kCellWords = 4, kCellBlock = 2, kCellMlp = 3;
   std::vector<uint32_t> fine_words;
   // Per fine voxel: 0 if occupied; else e, in micro voxels, such that the
   // box of the fine voxel's 4x4x4 micro voxels widened by e on every side
@@ -106,18 +111,17 @@ class FastMarcher {
     uint64_t checks = 0;
     // The last chunk's samples in order, as the vector test found them: the
     // candidate's lane (k - chunk_k), its point's position in its micro
-    // voxel v (p - v per axis: exact, so v + f is p), the fine voxel index,
-    // the micro voxel's block vertex (lx + 5 (ly + 5 lz)) and the coarse
-    // voxel index; entries [found_next, found_next + popcount(pending)) are
-    // pending. (The renderer's records need no v: the sample path finds it
-    // from the point again.)
+    // voxel v (p - v per axis: exact, so v + f is p), the fine voxel index
+    // (its block and MLP: FastSkipGrid::fine_words) and the micro voxel's
+    // block vertex (lx + 5 (ly + 5 lz)); entries [found_next, found_next +
+    // popcount(pending)) are pending. (The renderer's records need no v: the
+    // sample path finds it from the point again.)
     static constexpr int kMaxChunk = 16;
     int found_next = 0;
     alignas(64) int32_t found_lane[kMaxChunk];
     alignas(64) float found_f[3][kMaxChunk];
     alignas(64) int32_t found_fine[kMaxChunk];
     alignas(64) int32_t found_vertex[kMaxChunk];
-    alignas(64) int32_t found_coarse[kMaxChunk];
 
     // A candidate after k (whose point lies in the box of `size` micro
     // voxels from micro voxel `lo`) such that every candidate between them

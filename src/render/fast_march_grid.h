@@ -11,11 +11,9 @@ namespace edrnr::fast_march_detail {
 
 // What the march reads of the model, the same for all marchers of a render.
 struct Grid {
-  const uint32_t* words;  // FastSkipGrid::fine_words
+  const uint32_t* words;  // FastSkipGrid::fine_words (kCellWords per fine voxel)
   const uint8_t* reach;   // FastSkipGrid::reach
-  const int32_t* fine_to_block;
-  const int32_t* coarse_to_mlp;
-  int micro_res, fine_res, coarse_res;
+  int micro_res, fine_res;
   float hi;  // micro_res as a float: the largest coordinate inside the grid
 };
 

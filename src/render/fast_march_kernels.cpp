@@ -28,8 +28,7 @@ using DF = hn::CappedTag<float, FastMarcher::State::kMaxChunk>;  // at most 16 c
 using DI = hn::RebindToSigned<DF>;
 using DU = hn::RebindToUnsigned<DF>;
 
-// Micro voxels per coarse voxel edge.
-constexpr int kCvMicro = kMicroPerFine * kFinePerCoarse;
+constexpr int kCell = FastSkipGrid::kCellWords;
 
 // Chunks start below this candidate index: k + lane fits int32 lanes, and
 // float(k) of an int32 equals float(k) of the int64 (both round to nearest).
@@ -37,7 +36,7 @@ constexpr int64_t kVectorKLimit = int64_t(1) << 30;
 
 // Whether micro voxel v is occupied, from the fine voxels' masks.
 HWY_INLINE bool Occupied(const Vec3i& v, const Grid& g) {
-  const size_t word = 2 * FineIndex(v, g.fine_res) + size_t((v.z >> 1) & 1);
+  const size_t word = kCell * FineIndex(v, g.fine_res) + size_t((v.z >> 1) & 1);
   const int bit = (v.x & 3) + 4 * (v.y & 3) + 16 * (v.z & 1);
   return (g.words[word] >> bit) & 1u;
 }
@@ -66,7 +65,6 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
         st.found_f[2][n] = p.z - float(v.z);
         st.found_fine[n] = int32_t(FineIndex(v, g.fine_res));
         st.found_vertex[n] = (v.x & 3) + kBlockVertsPerAxis * ((v.y & 3) + kBlockVertsPerAxis * (v.z & 3));
-        st.found_coarse[n] = int32_t(linear_index(v.x / kCvMicro, v.y / kCvMicro, v.z / kCvMicro, g.coarse_res));
         ++n;
       }
     }
@@ -92,7 +90,8 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
   const auto fine =
       hn::Add(hn::ShiftRight<2>(vx), hn::Mul(fr, hn::Add(hn::ShiftRight<2>(vy), hn::Mul(fr, hn::ShiftRight<2>(vz)))));
   const auto one = hn::Set(di, 1), three = hn::Set(di, 3);
-  const auto word = hn::IfThenElseZero(inside, hn::Add(hn::Add(fine, fine), hn::And(hn::ShiftRight<1>(vz), one)));
+  const auto word = hn::IfThenElseZero(inside, hn::Add(hn::ShiftLeft<2>(fine), hn::And(hn::ShiftRight<1>(vz), one)));
+  static_assert(kCell == 4, "4 words per fine voxel");
   const auto bit =
       hn::Add(hn::Add(hn::And(vx, three), hn::ShiftLeft<2>(hn::And(vy, three))), hn::ShiftLeft<4>(hn::And(vz, one)));
   const auto w = hn::GatherIndex(du, g.words, word);
@@ -104,17 +103,14 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
   std::memcpy(&bits, bytes, sizeof(bits));
   if (bits == 0) return bits;
   // What the renderer's records take: the position in the micro voxel (the
-  // scalar p - float(v)), the block vertex and the coarse voxel.
+  // scalar p - float(v)) and the block vertex (the block and the MLP come
+  // with the fine voxel's cell).
   const auto fx = hn::Sub(px, hn::ConvertTo(df, vx));
   const auto fy = hn::Sub(py, hn::ConvertTo(df, vy));
   const auto fz = hn::Sub(pz, hn::ConvertTo(df, vz));
   const auto five = hn::Set(di, kBlockVertsPerAxis);
   const auto vertex =
       hn::Add(hn::And(vx, three), hn::Mul(five, hn::Add(hn::And(vy, three), hn::Mul(five, hn::And(vz, three)))));
-  static_assert(kCvMicro == 32, "coarse voxels of 32 micro voxels");
-  const auto cr = hn::Set(di, g.coarse_res);
-  const auto coarse =
-      hn::Add(hn::ShiftRight<5>(vx), hn::Mul(cr, hn::Add(hn::ShiftRight<5>(vy), hn::Mul(cr, hn::ShiftRight<5>(vz)))));
   // The samples' lanes packed to the front, in order: one compress per
   // vector where AVX-512 has it as an instruction, lane by lane elsewhere
   // (other targets emulate it at far greater cost).
@@ -128,19 +124,17 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
     hn::StoreU(hn::Compress(fz, mf), df, st.found_f[2]);
     hn::StoreU(hn::Compress(fine, m), di, st.found_fine);
     hn::StoreU(hn::Compress(vertex, m), di, st.found_vertex);
-    hn::StoreU(hn::Compress(coarse, m), di, st.found_coarse);
   }
 #else
   {
     constexpr int kM = FastMarcher::State::kMaxChunk;
     alignas(64) float lf[3][kM];
-    alignas(64) int32_t lv[3][kM];
+    alignas(64) int32_t lv[2][kM];
     hn::Store(fx, df, lf[0]);
     hn::Store(fy, df, lf[1]);
     hn::Store(fz, df, lf[2]);
     hn::Store(fine, di, lv[0]);
     hn::Store(vertex, di, lv[1]);
-    hn::Store(coarse, di, lv[2]);
     int n = 0;
     for (uint32_t b = bits; b != 0; b &= b - 1, ++n) {
       const int i = std::countr_zero(b);
@@ -148,7 +142,6 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
       for (int a = 0; a < 3; ++a) st.found_f[a][n] = lf[a][i];
       st.found_fine[n] = lv[0][i];
       st.found_vertex[n] = lv[1][i];
-      st.found_coarse[n] = lv[2][i];
     }
   }
 #endif
@@ -176,9 +169,10 @@ HWY_INLINE int Emit(FastMarcher::State& st, const Grid& g, Out& out, int room) {
     st.pending &= st.pending - 1;
     const int j = st.found_next++;
     ++n;
-    st.block = g.fine_to_block[st.found_fine[j]];
+    const uint32_t* cell = g.words + kCell * size_t(st.found_fine[j]);  // read by the vector test
+    st.block = int32_t(cell[FastSkipGrid::kCellBlock]);
     if constexpr (kRecords) {
-      const int32_t mlp = g.coarse_to_mlp[st.found_coarse[j]];
+      const int32_t mlp = int32_t(cell[FastSkipGrid::kCellMlp]);
       if (mlp < 0 || st.block < 0) {
         ++*out.missing;
         continue;
@@ -253,11 +247,8 @@ void MarchOut(FastMarcher* const* marchers, int n, int limit, Out* out, int* cou
   Grid g;
   g.words = s0.skip->fine_words.data();
   g.reach = s0.skip->reach.data();
-  g.fine_to_block = s0.model->fine_to_block.data();
-  g.coarse_to_mlp = s0.model->coarse_to_mlp.data();
   g.micro_res = s0.model->micro_res;
   g.fine_res = s0.skip->res;
-  g.coarse_res = s0.model->coarse_res();
   g.hi = float(g.micro_res);
   // The marchers' iterations interleaved: their dependency chains (point,
   // voxel, lookup, jump) are independent, so the CPU overlaps them.

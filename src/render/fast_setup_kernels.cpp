@@ -95,11 +95,8 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
   Grid grid;
   grid.words = skip.fine_words.data();
   grid.reach = skip.reach.data();
-  grid.fine_to_block = model.fine_to_block.data();
-  grid.coarse_to_mlp = model.coarse_to_mlp.data();
   grid.micro_res = model.micro_res;
   grid.fine_res = skip.res;
-  grid.coarse_res = model.coarse_res();
   grid.hi = grid_hi;
   constexpr size_t kMax = HWY_MAX_BYTES / sizeof(double);
   const size_t L = hn::Lanes(dd);

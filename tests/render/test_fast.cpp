@@ -341,15 +341,33 @@ TEST(Fast, SkipGridHoldsChebyshevDistances) {
         }
         ASSERT_EQ(int(g.at(x, y, z)), best) << x << "," << y << "," << z;
       }
-  // The micro masks of the fine voxels hold the micro bitmap.
+  // The micro masks of the fine voxels hold the micro bitmap, and each
+  // fine voxel's cell its block and its coarse voxel's MLP (or -1 for both
+  // when it is empty).
   const Bitmap3& micro = m.occupancy[int(Tier::Micro)];
-  ASSERT_EQ(g.fine_words.size(), size_t(2) * r * r * r);
+  constexpr size_t kCell = FastSkipGrid::kCellWords;
+  ASSERT_EQ(g.fine_words.size(), kCell * r * r * r);
+  const int per_coarse = r / m.coarse_res();
+  size_t with_block = 0;
+  for (int z = 0; z < r; ++z)
+    for (int y = 0; y < r; ++y)
+      for (int x = 0; x < r; ++x) {
+        const uint32_t* cell = g.fine_words.data() + kCell * linear_index(x, y, z, r);
+        const bool empty = g.at(x, y, z) != 0;
+        const int32_t block = empty ? -1 : m.fine_to_block[linear_index(x, y, z, r)];
+        const int32_t mlp =
+            empty ? -1 : m.coarse_to_mlp[linear_index(x / per_coarse, y / per_coarse, z / per_coarse, m.coarse_res())];
+        ASSERT_EQ(int32_t(cell[FastSkipGrid::kCellBlock]), block) << x << "," << y << "," << z;
+        ASSERT_EQ(int32_t(cell[FastSkipGrid::kCellMlp]), mlp) << x << "," << y << "," << z;
+        with_block += block >= 0 && mlp >= 0;
+      }
+  EXPECT_GT(with_block, 10u);
   size_t occupied = 0;
   for (int z = 0; z < m.micro_res; ++z)
     for (int y = 0; y < m.micro_res; ++y)
       for (int x = 0; x < m.micro_res; ++x) {
         const size_t f = size_t(x / 4) + size_t(r) * (size_t(y / 4) + size_t(r) * size_t(z / 4));
-        const uint32_t word = g.fine_words[2 * f + size_t((z & 3) >> 1)];
+        const uint32_t word = g.fine_words[kCell * f + size_t((z & 3) >> 1)];
         const bool bit = (word >> ((x & 3) + 4 * (y & 3) + 16 * (z & 1))) & 1u;
         ASSERT_EQ(bit, micro.get(x, y, z)) << x << "," << y << "," << z;
         occupied += bit;
