@@ -205,26 +205,6 @@ void FastMarcher::set_up(const SceneModel& model, const FastSkipGrid& skip, cons
   assign(model, skip, micro_ray, k, k_end, exit, scale, offset);
 }
 
-void FastMarcher::assign(const SceneModel& model, const FastSkipGrid& skip, const MicroRay& micro_ray, int64_t k,
-                         int64_t k_end, const double exit[3], const double scale[3], const double offset[3]) {
-  st_.model = &model;
-  st_.skip = &skip;
-  st_.ray = micro_ray;
-  for (int a = 0; a < 3; ++a) {
-    st_.exit[a] = exit[a];
-    st_.scale[a] = scale[a];
-    st_.offset[a] = offset[a];
-  }
-  st_.k = k;
-  st_.k_end = k_end;
-  st_.chunk_k = 0;
-  st_.pending = 0;
-  st_.dense = false;
-  st_.block = -1;
-  st_.checks = 0;
-  st_.found_next = 0;
-}
-
 bool FastMarcher::next(MarchSample& s) {
   FastMarcher* self = this;
   int count = 0;

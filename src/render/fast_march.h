@@ -81,7 +81,35 @@ class FastMarcher {
   // terms per axis (State::exit, scale, offset), computed by the caller as
   // set_up does.
   void assign(const SceneModel& model, const FastSkipGrid& skip, const MicroRay& micro_ray, int64_t k, int64_t k_end,
-              const double exit[3], const double scale[3], const double offset[3]);
+              const double exit[3], const double scale[3], const double offset[3]) {
+    st_.model = &model;
+    st_.skip = &skip;
+    st_.ray = micro_ray;
+    for (int a = 0; a < 3; ++a) {
+      st_.exit[a] = exit[a];
+      st_.scale[a] = scale[a];
+      st_.offset[a] = offset[a];
+    }
+    st_.k = k;
+    st_.k_end = k_end;
+    st_.chunk_k = 0;
+    st_.pending = 0;
+    st_.dense = false;
+    st_.block = -1;
+    st_.checks = 0;
+    st_.found_next = 0;
+  }
+  // A marcher of `model` without candidates (empty(), no occupancy checks);
+  // the ray and the jump terms it held stay, unread (a march of it ends at
+  // once).
+  void clear(const SceneModel& model, const FastSkipGrid& skip) {
+    st_.model = &model;
+    st_.skip = &skip;
+    st_.k = 0;
+    st_.k_end = -1;
+    st_.pending = 0;
+    st_.checks = 0;
+  }
 
   // The next sample; false once the ray has no more.
   bool next(MarchSample& s);
@@ -187,7 +215,8 @@ void fast_march_records(FastMarcher* const* marchers, const uint32_t* rays, int 
 // The marchers of n rays of a tile: ray r < n through the centre of pixel
 // (x0 + r % tw, y0 + r / tw). marchers[r] ends up as set_up(model, skip,
 // camera.pixel_ray(...), make_micro_ray(model, ray, delta)) leaves it, bit for
-// bit, with the per-ray divisions and square roots in SIMD lanes (rays with a
+// bit (or, if no candidate is left, empty with the same occupancy checks),
+// with the per-ray divisions and square roots in SIMD lanes (rays with a
 // zero or tiny direction component, or candidate indices from 2^51 on, take
 // set_up itself), and then advanced in the lanes through the empty space in
 // front of the object: the march's jumps from fine voxels with a reach of

@@ -279,18 +279,18 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
         SetUpAlone(model, skip, cam, delta, aabb, x0 + r % tw, y0 + r / tw, grid, fm, dx[r], dy[r], dz[r], hit_aabb[r]);
         continue;
       }
-      MicroRay mr = m0;
-      mr.dir = Vec3f{dm[0][l], dm[1][l], dm[2][l]};
-      if (flags[0][l] != 0) {
+      if (flags[0][l] != 0 && kk[0][l] <= kk[1][l]) {
+        MicroRay mr = m0;
+        mr.dir = Vec3f{dm[0][l], dm[1][l], dm[2][l]};
         const double e[3] = {exit[0][l], exit[1][l], exit[2][l]};
         const double sc[3] = {scale[0][l], scale[1][l], scale[2][l]};
         const double of[3] = {offset[0][l], offset[1][l], offset[2][l]};
         fm.assign(model, skip, mr, int64_t(kk[0][l]), int64_t(kk[1][l]), e, sc, of);
         fm.state().checks = uint64_t(kk[2][l]);
         fm.state().dense = flags[4][l] != 0;
-      } else {
-        const double z[3] = {0, 0, 0};
-        fm.assign(model, skip, mr, 0, -1, z, z, z);
+      } else {  // no candidates, or none left after the first steps (which counted their lookups)
+        fm.clear(model, skip);
+        if (flags[0][l] != 0) fm.state().checks = uint64_t(kk[2][l]);
       }
       dx[r] = float(dir[0][l]);
       dy[r] = float(dir[1][l]);
