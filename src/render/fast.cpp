@@ -180,7 +180,10 @@ class TileRenderer {
       w.rgb[r][0] = w.rgb[r][1] = w.rgb[r][2] = 0.f;
       w.open[r] = !fm.empty();  // a ray without candidates keeps the background
       w.exhausted[r] = false;
-      if (w.open[r]) w.active[n_active++] = r;
+      if (w.open[r])
+        w.active[n_active++] = r;
+      else  // its lookups are all made (the others' are counted as they close)
+        tot.stats.occupancy_checks += fm.occupancy_checks();
     }
     bool encoded = false;
     double traversal = 0, compositing = 0;
@@ -248,13 +251,15 @@ class TileRenderer {
         for (int c = 0; c < 3; ++c) w.rgb[r][c] = rgb[c];
         w.T[r] = T;
         if (T < transmittance_min_) w.open[r] = false;
-        if (w.open[r]) w.active[still_open++] = r;
+        if (w.open[r])
+          w.active[still_open++] = r;
+        else  // it marches no more
+          tot.stats.occupancy_checks += w.marchers[size_t(r)].occupancy_checks();
       }
       n_active = still_open;
       tot.stats.samples += composited;
       if (profile_) compositing += since(t);
     }
-    for (int r = 0; r < n; ++r) tot.stats.occupancy_checks += w.marchers[size_t(r)].occupancy_checks();
     for (int r = 0, y = tile.y0; y < tile.y1; ++y) {  // row by row: no division per pixel
       float* px = image_.at(tile.x0, y);
       for (int x = 0; x < tw; ++x, ++r)
