@@ -345,6 +345,64 @@ HWY_INLINE hn::Vec<DT> CodeValue(DT d, VU u, VU mask) {
   return hn::ConvertTo(d, hn::BitCast(hn::RebindToSigned<DT>(), hn::And(u, mask)));
 }
 
+// The two-word vertices of InterpolateQ4 on AVX-512: for the corner pair p
+// (words `offset` on from a sample's corner (0, 0, 0)), each sample's 4
+// words (a0, a1, b0, b1: corner a's two words, then b's) read with one
+// 16-byte load into a 128-bit block of a register (register q holds samples
+// q, q + 4, q + 8, q + 12), then transposed within the blocks, so that
+// vector a0 holds word a0 of samples 0 .. N - 1 in order: the rows
+// LoadInterleaved4 of the copies makes, without the copies (whose 16-byte
+// stores a 64-byte load cannot forward). Rows to words (N lanes each):
+// a0 -> 2 p, b0 -> 2 p + 1, a1 -> 8 + 2 p, b1 -> 9 + 2 p.
+template <class DT>
+constexpr bool PairWordsInRegisters(DT d) {
+#if HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
+  return hn::MaxLanes(d) == 16 || hn::MaxLanes(d) == 8;
+#else
+  (void)d;
+  return false;
+#endif
+}
+template <class DT>
+HWY_INLINE void PairWords(DT d, const uint32_t* q4, const uint32_t* vertex, uint32_t offset, int p, size_t N,
+                          uint32_t* words) {
+#if HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
+  auto at = [&](size_t l) {
+    return _mm_loadu_si128(reinterpret_cast<const __m128i*>(q4 + size_t(vertex[l]) * 2 + offset));
+  };
+  uint32_t* a0 = words + size_t(2 * p) * N;
+  uint32_t* b0 = words + size_t(2 * p + 1) * N;
+  uint32_t* a1 = words + size_t(8 + 2 * p) * N;
+  uint32_t* b1 = words + size_t(9 + 2 * p) * N;
+  if constexpr (hn::MaxLanes(d) == 16) {
+    __m512i z[4];
+    for (size_t q = 0; q < 4; ++q) {
+      z[q] = _mm512_castsi128_si512(at(q));
+      z[q] = _mm512_inserti32x4(z[q], at(q + 4), 1);
+      z[q] = _mm512_inserti32x4(z[q], at(q + 8), 2);
+      z[q] = _mm512_inserti32x4(z[q], at(q + 12), 3);
+    }
+    const __m512i t0 = _mm512_unpacklo_epi32(z[0], z[1]), t1 = _mm512_unpackhi_epi32(z[0], z[1]);
+    const __m512i t2 = _mm512_unpacklo_epi32(z[2], z[3]), t3 = _mm512_unpackhi_epi32(z[2], z[3]);
+    _mm512_store_si512(a0, _mm512_unpacklo_epi64(t0, t2));
+    _mm512_store_si512(a1, _mm512_unpackhi_epi64(t0, t2));
+    _mm512_store_si512(b0, _mm512_unpacklo_epi64(t1, t3));
+    _mm512_store_si512(b1, _mm512_unpackhi_epi64(t1, t3));
+  } else if constexpr (hn::MaxLanes(d) == 8) {
+    __m256i z[4];
+    for (size_t q = 0; q < 4; ++q) z[q] = _mm256_inserti128_si256(_mm256_castsi128_si256(at(q)), at(q + 4), 1);
+    const __m256i t0 = _mm256_unpacklo_epi32(z[0], z[1]), t1 = _mm256_unpackhi_epi32(z[0], z[1]);
+    const __m256i t2 = _mm256_unpacklo_epi32(z[2], z[3]), t3 = _mm256_unpackhi_epi32(z[2], z[3]);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(a0), _mm256_unpacklo_epi64(t0, t2));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(a1), _mm256_unpackhi_epi64(t0, t2));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(b0), _mm256_unpacklo_epi64(t1, t3));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(b1), _mm256_unpackhi_epi64(t1, t3));
+  }
+#else
+  (void)d, (void)q4, (void)vertex, (void)offset, (void)p, (void)N, (void)words;
+#endif
+}
+
 // Features of the chunk's samples from INT4 codes, 8 channels per 32-bit
 // word (F a multiple of 8), into rows of X: float values (Float) or the
 // density net's INT8 inputs (Int8, feature_in: per-channel multipliers).
@@ -370,7 +428,9 @@ void InterpolateQ4(DT d, size_t N, const FastModel& fm, Scratch& s, const float*
   // neighbours along x, so their 4 words are consecutive: copied per sample
   // and de-interleaved, which is cheaper than 16 gathers.
   const bool pairs = vertex_words == 2;
-  if (pairs) {
+  if (pairs && PairWordsInRegisters(d)) {
+    for (int p = 0; p < 4; ++p) PairWords(d, q4, s.vertex, kCornerVertex[2 * p] * 2, p, N, s.words);
+  } else if (pairs) {
     for (size_t l = 0; l < N; ++l) {
       const uint32_t* v = q4 + size_t(s.vertex[l]) * 2;
       for (int p = 0; p < 4; ++p)
