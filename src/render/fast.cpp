@@ -116,6 +116,9 @@ struct TileWork {
   int n_gathered = 0;
   std::vector<FastSampleOut> outs;
   std::vector<uint32_t> order, count, first, used;
+  // The round's samples grouped by MLP (order), field by field (FastBatch).
+  std::vector<uint32_t> batch_ray, batch_vertex;
+  std::vector<float> batch_fx, batch_fy, batch_fz;
 };
 
 struct ThreadTotals {
@@ -226,8 +229,11 @@ class TileRenderer {
         // Interpolation and MLPs, one coarse voxel's batch at a time.
         if (w.outs.size() < w.n_samples) w.outs.resize(w.n_samples);
         for (uint32_t u : w.used) {
-          fast_eval_batch(fm_, u, w.samples.data(), w.order.data() + w.first[u], w.count[u], w.dir.data(), kTileRays,
-                          delta_, w.outs.data(), profile_ ? &kernel : nullptr);
+          const size_t f = w.first[u];
+          const FastBatch batch{w.batch_ray.data() + f, w.batch_vertex.data() + f, w.batch_fx.data() + f,
+                                w.batch_fy.data() + f,  w.batch_fz.data() + f,     w.order.data() + f};
+          fast_eval_batch(fm_, u, batch, w.count[u], w.dir.data(), kTileRays, delta_, w.outs.data(),
+                          profile_ ? &kernel : nullptr);
           tot.profile.mlp_samples += w.count[u];
           w.count[u] = 0;
         }
@@ -322,7 +328,7 @@ class TileRenderer {
 
   // Counting sort of the round's samples by MLP, whose counts gather() made
   // (w.count, and w.used: the MLPs met): w.order holds the samples of MLP u
-  // at [first[u], first[u] + count[u]).
+  // at [first[u], first[u] + count[u]), and w.batch_* their fields there.
   void group_by_mlp(TileWork& w) const {
     const FastSample* samples = w.samples.data();
     uint32_t at = 0;
@@ -331,7 +337,14 @@ class TileRenderer {
       at += w.count[u];
       w.count[u] = 0;
     }
-    if (w.order.size() < at) w.order.resize(at);
+    if (w.order.size() < at) {
+      w.order.resize(at);
+      w.batch_ray.resize(at);
+      w.batch_vertex.resize(at);
+      w.batch_fx.resize(at);
+      w.batch_fy.resize(at);
+      w.batch_fz.resize(at);
+    }
     // The samples in the order they were marched, each MLP's cursor kept
     // in a register while its run lasts.
     constexpr uint32_t kNone = UINT32_MAX;  // no MLP (indices are below the MLP count)
@@ -339,13 +352,20 @@ class TileRenderer {
     for (int a = 0; a < w.n_gathered; ++a) {
       const int r = w.gathered[a];
       for (uint32_t i = w.begin[r]; i < w.end[r]; ++i) {
-        const uint32_t u = samples[i].mlp;
+        const FastSample& rec = samples[i];
+        const uint32_t u = rec.mlp;
         if (u != cur) {
           if (cur != kNone) w.count[cur] = pos - w.first[cur];
           cur = u;
           pos = w.first[u] + w.count[u];
         }
-        w.order[pos++] = i;
+        w.order[pos] = i;
+        w.batch_ray[pos] = rec.ray;
+        w.batch_vertex[pos] = rec.vertex;
+        w.batch_fx[pos] = rec.fx;
+        w.batch_fy[pos] = rec.fy;
+        w.batch_fz[pos] = rec.fz;
+        ++pos;
       }
     }
     if (cur != kNone) w.count[cur] = pos - w.first[cur];

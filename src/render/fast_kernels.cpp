@@ -35,15 +35,6 @@ constexpr size_t kCap = HWY_MAX_BYTES / sizeof(float);
 // (0, 0, 0), in the reference's corner order (x fastest).
 constexpr uint32_t kCornerVertex[8] = {0, 1, 5, 6, 25, 26, 30, 31};
 
-// A FastSample as 32-bit words (the kernels gather its fields).
-static_assert(sizeof(FastSample) == 6 * sizeof(uint32_t), "FastSample: six 32-bit words");
-constexpr int32_t kSampleWords = 6;
-constexpr int32_t kSampleRay = offsetof(FastSample, ray) / 4, kSampleVertex = offsetof(FastSample, vertex) / 4,
-                  kSampleFx = offsetof(FastSample, fx) / 4;
-static_assert(offsetof(FastSample, fy) == offsetof(FastSample, fx) + 4 &&
-                  offsetof(FastSample, fz) == offsetof(FastSample, fx) + 8,
-              "FastSample: fx, fy, fz in a row");
-
 // Int8: samples are run in segments of at most this many, whose rays' direction
 // parts are computed once per ray (slot) before the samples' chunks.
 constexpr size_t kSegment = 256;
@@ -736,45 +727,48 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
   if (seconds) seconds->mlp += std::chrono::duration<double>(Clock::now() - t1).count();
 }
 
-// One chunk of a batch: samples order[0, valid) in the lanes of d (the tail
-// repeats the last sample; Int8: slots[l] is lane l's slot in s.dir_q), their
-// outputs to out.
+// One chunk of a batch: its samples [0, valid) (b: the batch from the
+// chunk's first sample on) in the lanes of d (the tail repeats the last
+// sample; Int8: slots[l] is lane l's slot in s.dir_q), their outputs to out.
 template <bool kInt8, class DT>
-void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, const FastSample* samples,
-              const uint32_t* order, size_t valid, const int32_t* slots, const float* dir, size_t ray_stride,
-              float delta, Scratch& s, FastSampleOut* out, FastKernelSeconds* seconds) {
+void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, const FastBatch& b, size_t valid,
+              const int32_t* slots, const float* dir, size_t ray_stride, float delta, Scratch& s, FastSampleOut* out,
+              FastKernelSeconds* seconds) {
   const size_t N = hn::Lanes(d);
   const hn::RebindToSigned<DT> di;
-  // The lanes' samples (the tail repeats the last), their fields gathered
-  // from the records (6 words each).
-  alignas(64) int32_t word[kCap], slot[kCap];
-  for (size_t l = 0; l < N; ++l) {
-    const size_t i = std::min(l, valid - 1);
-    word[l] = int32_t(order[i]) * kSampleWords;
-    slot[l] = kInt8 ? slots[i] : 0;
-  }
   const hn::RebindToUnsigned<DT> du;
-  const auto at = hn::Load(di, word);
-  const uint32_t* rec = reinterpret_cast<const uint32_t*>(samples);
-  const float* recf = reinterpret_cast<const float*>(samples);
-  hn::Store(hn::GatherIndex(d, recf + kSampleFx, at), d, s.fx);
-  hn::Store(hn::GatherIndex(d, recf + kSampleFx + 1, at), d, s.fy);
-  hn::Store(hn::GatherIndex(d, recf + kSampleFx + 2, at), d, s.fz);
-  hn::Store(hn::GatherIndex(du, rec + kSampleVertex, at), du, s.vertex);
-  hn::Store(hn::GatherIndex(du, rec + kSampleRay, at), du, s.ray);
-  s.slot_base = slot[0];
-  hn::Store(hn::Sub(hn::Load(di, slot), hn::Set(di, s.slot_base)), di, s.slot);
+  alignas(64) int32_t slot[kCap];
+  if (valid == N) {  // whole vectors of the fields
+    hn::Store(hn::LoadU(d, b.fx), d, s.fx);
+    hn::Store(hn::LoadU(d, b.fy), d, s.fy);
+    hn::Store(hn::LoadU(d, b.fz), d, s.fz);
+    hn::Store(hn::LoadU(du, b.vertex), du, s.vertex);
+    hn::Store(hn::LoadU(du, b.ray), du, s.ray);
+    if (kInt8) hn::Store(hn::LoadU(di, slots), di, slot);
+  } else {  // the tail repeats the last sample
+    for (size_t l = 0; l < N; ++l) {
+      const size_t i = std::min(l, valid - 1);
+      s.fx[l] = b.fx[i];
+      s.fy[l] = b.fy[i];
+      s.fz[l] = b.fz[i];
+      s.vertex[l] = b.vertex[i];
+      s.ray[l] = b.ray[i];
+      slot[l] = kInt8 ? slots[i] : 0;
+    }
+  }
+  s.slot_base = kInt8 ? slot[0] : 0;
+  if (kInt8) hn::Store(hn::Sub(hn::Load(di, slot), hn::Set(di, s.slot_base)), di, s.slot);
   EvalChunk<kInt8>(d, N, fm, p, q, dir, ray_stride, delta, s, seconds);
   for (size_t l = 0; l < valid; ++l) {
-    FastSampleOut& o = out[order[l]];
+    FastSampleOut& o = out[b.order[l]];
     o.alpha = s.out[l];
     o.trans = s.out[N + l];
     for (int c = 0; c < 3; ++c) o.rgb[c] = s.out[size_t(2 + c) * N + l];
   }
 }
 
-void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, const uint32_t* order, size_t n,
-               const float* dir, size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds) {
+void EvalBatch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t n, const float* dir, size_t ray_stride,
+               float delta, FastSampleOut* out, FastKernelSeconds* seconds) {
   const DF d;
   const hn::Half<DF> dh;
   const size_t N = hn::Lanes(d);
@@ -798,7 +792,7 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, con
       seg_end = std::min(n, i0 + kSegment);  // kSegment is a multiple of N: chunks do not cross segments
       size_t slots = 0;
       for (size_t i = i0; i < seg_end; ++i) {
-        const uint32_t ray = samples[order[i]].ray;
+        const uint32_t ray = batch.ray[i];
         if (slots == 0 || seg_rays[slots - 1] != ray) seg_rays[slots++] = ray;
         seg_slot[i - i0] = int32_t(slots - 1);
       }
@@ -810,7 +804,7 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, con
     if (q4 != nullptr) {
       const size_t next_end = std::min(n, i0 + 2 * N);
       for (size_t i = i0 + N; i < next_end; ++i) {
-        const uint8_t* v = q4 + size_t(samples[order[i]].vertex) * vertex_bytes;
+        const uint8_t* v = q4 + size_t(batch.vertex[i]) * vertex_bytes;
         for (int j = 0; j < 8; j += 2) hwy::Prefetch(v + kCornerVertex[j] * vertex_bytes);
       }
     }
@@ -819,15 +813,22 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastSample* samples, con
     // same, for half the work on padding lanes. (Quarter-width vectors for
     // the shortest tails were slower.)
     const int32_t* slots = seg_slot + (i0 - seg_begin);
+    FastBatch b = batch;  // from the chunk's first sample on
+    b.ray += i0;
+    b.vertex += i0;
+    b.fx += i0;
+    b.fy += i0;
+    b.fz += i0;
+    b.order += i0;
     if (N >= 8 && valid <= hn::Lanes(dh)) {
       if (int8)
-        RunChunk<true>(dh, fm, p, q, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+        RunChunk<true>(dh, fm, p, q, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
       else
-        RunChunk<false>(dh, fm, p, q, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+        RunChunk<false>(dh, fm, p, q, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
     } else if (int8) {
-      RunChunk<true>(d, fm, p, q, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+      RunChunk<true>(d, fm, p, q, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
     } else {
-      RunChunk<false>(d, fm, p, q, samples, order + i0, valid, slots, dir, ray_stride, delta, s, out, seconds);
+      RunChunk<false>(d, fm, p, q, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
     }
   }
 }
@@ -882,9 +883,25 @@ HWY_EXPORT(EvalBatch);
 HWY_EXPORT(EncodeDirections);
 HWY_EXPORT(Target);
 
+void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t n, const float* dir,
+                     size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds) {
+  HWY_DYNAMIC_DISPATCH(EvalBatch)(fm, mlp, batch, n, dir, ray_stride, delta, out, seconds);
+}
+
 void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastSample* samples, const uint32_t* order, size_t n,
                      const float* dir, size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds) {
-  HWY_DYNAMIC_DISPATCH(EvalBatch)(fm, mlp, samples, order, n, dir, ray_stride, delta, out, seconds);
+  std::vector<uint32_t> ray(n), vertex(n);
+  std::vector<float> fx(n), fy(n), fz(n);
+  for (size_t i = 0; i < n; ++i) {
+    const FastSample& r = samples[order[i]];
+    ray[i] = r.ray;
+    vertex[i] = r.vertex;
+    fx[i] = r.fx;
+    fy[i] = r.fy;
+    fz[i] = r.fz;
+  }
+  const FastBatch batch{ray.data(), vertex.data(), fx.data(), fy.data(), fz.data(), order};
+  fast_eval_batch(fm, mlp, batch, n, dir, ray_stride, delta, out, seconds);
 }
 
 void fast_encode_directions(const FastModel& fm, const float* dx, const float* dy, const float* dz, size_t n,

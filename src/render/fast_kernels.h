@@ -35,10 +35,27 @@ struct FastKernelSeconds {
   double interpolation = 0, mlp = 0;
 };
 
-// Evaluates samples[order[i]], i < n, which all use MLP `mlp`, and writes
-// out[order[i]]. dir: the direction inputs of the tile's rays (fast_encode_
-// directions), value d of ray r at dir[d * ray_stride + r]. delta: sample
-// spacing in scene units. seconds (optional) collects the time per phase.
+// A batch's samples field by field, in batch order: sample i's ray ray[i],
+// block vertex vertex[i] and trilinear weights fx[i], fy[i], fz[i] (as in
+// FastSample); its outputs go to out[order[i]]. Read as whole vectors, so
+// the kernels load a chunk's fields instead of gathering them from records.
+struct FastBatch {
+  const uint32_t* ray = nullptr;
+  const uint32_t* vertex = nullptr;
+  const float* fx = nullptr;
+  const float* fy = nullptr;
+  const float* fz = nullptr;
+  const uint32_t* order = nullptr;
+};
+
+// Evaluates samples i < n of `batch`, which all use MLP `mlp`, and writes
+// out[batch.order[i]]. dir: the direction inputs of the tile's rays
+// (fast_encode_directions), value d of ray r at dir[d * ray_stride + r].
+// delta: sample spacing in scene units. seconds (optional) collects the
+// time per phase.
+void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t n, const float* dir,
+                     size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds);
+// The same for the records samples[order[i]], i < n (made into a FastBatch).
 void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastSample* samples, const uint32_t* order, size_t n,
                      const float* dir, size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds);
 
