@@ -137,8 +137,8 @@ class FastMarcher {
     bool dense = false;         // the last chunk tested held a sample: test the next one without a lookup
     int32_t block = -1;
     uint64_t checks = 0;
-    // The last chunk's samples in order, as the vector test found them: the
-    // candidate's lane (k - chunk_k), its point's position in its micro
+    // The last chunk's samples in order, as the vector test found them (the
+    // candidate of the lowest pending bit first): its point's position in its micro
     // voxel v (p - v per axis: exact, so v + f is p), the fine voxel index
     // (its block and MLP: FastSkipGrid::fine_words) and the micro voxel's
     // block vertex (lx + 5 (ly + 5 lz)); entries [found_next, found_next +
@@ -146,7 +146,6 @@ class FastMarcher {
     // sample path finds it from the point again.)
     static constexpr int kMaxChunk = 16;
     int found_next = 0;
-    alignas(64) int32_t found_lane[kMaxChunk];
     alignas(64) float found_f[3][kMaxChunk];
     alignas(64) int32_t found_fine[kMaxChunk];
     alignas(64) int32_t found_vertex[kMaxChunk];

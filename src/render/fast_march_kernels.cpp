@@ -59,7 +59,6 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
       const Vec3f p = r.point(k + i);
       if (VoxelOf(p, g, v) && Occupied(v, g)) {
         bits |= uint32_t(1) << i;
-        st.found_lane[n] = i;
         st.found_f[0][n] = p.x - float(v.x);
         st.found_f[1][n] = p.y - float(v.y);
         st.found_f[2][n] = p.z - float(v.z);
@@ -118,7 +117,6 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
   {
     const auto m = hn::RebindMask(di, samples);
     const auto mf = hn::RebindMask(df, samples);
-    hn::StoreU(hn::Compress(lane, m), di, st.found_lane);
     hn::StoreU(hn::Compress(fx, mf), df, st.found_f[0]);
     hn::StoreU(hn::Compress(fy, mf), df, st.found_f[1]);
     hn::StoreU(hn::Compress(fz, mf), df, st.found_f[2]);
@@ -138,7 +136,6 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
     int n = 0;
     for (uint32_t b = bits; b != 0; b &= b - 1, ++n) {
       const int i = std::countr_zero(b);
-      st.found_lane[n] = i;
       for (int a = 0; a < 3; ++a) st.found_f[a][n] = lf[a][i];
       st.found_fine[n] = lv[0][i];
       st.found_vertex[n] = lv[1][i];
@@ -166,6 +163,7 @@ template <bool kRecords>
 HWY_INLINE int Emit(FastMarcher::State& st, const Grid& g, Out& out, int room) {
   int n = 0;
   while (st.pending != 0 && n < room) {
+    const int lane = std::countr_zero(st.pending);  // the pending samples are handed out in order
     st.pending &= st.pending - 1;
     const int j = st.found_next++;
     ++n;
@@ -188,7 +186,7 @@ HWY_INLINE int Emit(FastMarcher::State& st, const Grid& g, Out& out, int room) {
       // The micro voxel from the candidate's point again (the same float
       // operations as the vector test, which found the point in the grid).
       MarchSample& s = out.samples[out.written];
-      s.k = st.chunk_k + st.found_lane[j];
+      s.k = st.chunk_k + lane;
       Vec3i v;
       VoxelOf(st.ray.point(s.k), g, v);
       // v + (p - v) is p: the difference of a float in [v, v + 1] and v >= 0 is exact.
