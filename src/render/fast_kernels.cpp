@@ -790,10 +790,16 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t
     if (int8 && fm.dir_dims > 0 && i0 >= seg_end) {
       seg_begin = i0;
       seg_end = std::min(n, i0 + kSegment);  // kSegment is a multiple of N: chunks do not cross segments
+      // Without a branch per sample: each sample writes its ray at the next
+      // slot, which it takes only if the ray changed (rays are tile indices,
+      // never UINT32_MAX).
       size_t slots = 0;
+      uint32_t last = UINT32_MAX;
       for (size_t i = i0; i < seg_end; ++i) {
         const uint32_t ray = batch.ray[i];
-        if (slots == 0 || seg_rays[slots - 1] != ray) seg_rays[slots++] = ray;
+        seg_rays[slots] = ray;
+        slots += ray != last;
+        last = ray;
         seg_slot[i - i0] = int32_t(slots - 1);
       }
       DirectionParts(d, N, fm, p, q, dir, ray_stride, seg_rays, slots, s);
