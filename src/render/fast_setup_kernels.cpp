@@ -120,11 +120,11 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
   const VD half = hn::Set(dd, 0.5), vdelta = hn::Set(dd, ddelta);
   double om[3];  // the micro origin as doubles
   for (int a = 0; a < 3; ++a) om[a] = double(m0.origin[a]);
-  alignas(64) double u[kMax], v[kMax], ts[kMax], dir[3][kMax];
+  alignas(64) double u[kMax], v[kMax], ts[kMax];
   // The march's terms per lane; zeroed once, as vectors where no lane can
   // have a sample leave them unwritten (and unread).
   alignas(64) double exit[3][kMax] = {}, scale[3][kMax] = {}, offset[3][kMax] = {}, kk[3][kMax] = {};
-  alignas(64) double aabb_far[kMax], flags[5][kMax];
+  alignas(64) double flags[3][kMax];  // per lane: valid (0), set_up takes it over (1), dense (2)
   alignas(64) float dm[3][kMax];
   for (int r0 = 0; r0 < n; r0 += int(L)) {
     // Lanes past the last ray repeat it. One division per vector: the
@@ -160,9 +160,10 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
     VD an = tn, af = tf;
     VD dmd[3];
     VF fdir[3];
+    VF fdir_unit[3];  // the unit direction as floats
     for (int a = 0; a < 3; ++a) {
       d[a] = hn::Div(d[a], len);
-      hn::Store(d[a], dd, dir[a]);
+      fdir_unit[a] = hn::DemoteTo(dfh, d[a]);
       // make_micro_ray: the direction in micro units, rounded to float.
       const auto f = hn::DemoteTo(dfh, hn::Mul(d[a], hn::Set(dd, mscale[a])));
       hn::Store(f, dfh, dm[a]);
@@ -262,20 +263,26 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
         active = hn::And(hn::Or(far, outside), hn::Le(kv, k_end));
       }
       hn::Store(checks, dd, kk[2]);
-      hn::Store(hn::IfThenElseZero(dense, one), dd, flags[4]);
+      hn::Store(hn::IfThenElseZero(dense, one), dd, flags[2]);
       hn::Store(kv, dd, kk[0]);
       hn::Store(k_end, dd, kk[1]);
     }
-    hn::Store(af, dd, aabb_far);
     hn::Store(none ? zero : hn::IfThenElseZero(valid, one), dd, flags[0]);
-    hn::Store(hn::IfThenElseZero(has_candidates, one), dd, flags[3]);
-    hn::Store(hn::IfThenElseZero(hn::Le(an, af), one), dd, flags[1]);
-    hn::Store(hn::IfThenElseZero(special, one), dd, flags[2]);
+    hn::Store(hn::IfThenElseZero(special, one), dd, flags[1]);
     const int valid_lanes = std::min(int(L), n - r0);
+    // The directions and the AABB hits of the vector's rays (the lanes set_up
+    // takes over are written again below).
+    const auto store = hn::FirstN(dfh, size_t(valid_lanes));
+    hn::BlendedStore(fdir_unit[0], store, dfh, dx + r0);
+    hn::BlendedStore(fdir_unit[1], store, dfh, dy + r0);
+    hn::BlendedStore(fdir_unit[2], store, dfh, dz + r0);
+    uint8_t hit_bits[8] = {0};
+    hn::StoreMaskBits(dd, hn::And(has_candidates, hn::And(hn::Le(an, af), hn::Ge(af, zero))), hit_bits);
+    for (int l = 0; l < valid_lanes; ++l) hit_aabb[r0 + l] = (hit_bits[l / 8] >> (l % 8)) & 1;
     for (int l = 0; l < valid_lanes; ++l) {
       const int r = r0 + l;
       FastMarcher& fm = marchers[r];
-      if (flags[2][l] != 0) {
+      if (flags[1][l] != 0) {
         SetUpAlone(model, skip, cam, delta, aabb, x0 + r % tw, y0 + r / tw, grid, fm, dx[r], dy[r], dz[r], hit_aabb[r]);
         continue;
       }
@@ -287,15 +294,11 @@ void SetupRays(const SceneModel& model, const FastSkipGrid& skip, const Camera& 
         const double of[3] = {offset[0][l], offset[1][l], offset[2][l]};
         fm.assign(model, skip, mr, int64_t(kk[0][l]), int64_t(kk[1][l]), e, sc, of);
         fm.state().checks = uint64_t(kk[2][l]);
-        fm.state().dense = flags[4][l] != 0;
+        fm.state().dense = flags[2][l] != 0;
       } else {  // no candidates, or none left after the first steps (which counted their lookups)
         fm.clear(model, skip);
         if (flags[0][l] != 0) fm.state().checks = uint64_t(kk[2][l]);
       }
-      dx[r] = float(dir[0][l]);
-      dy[r] = float(dir[1][l]);
-      dz[r] = float(dir[2][l]);
-      hit_aabb[r] = flags[3][l] != 0 && flags[1][l] != 0 && aabb_far[l] >= 0;
     }
   }
 }
