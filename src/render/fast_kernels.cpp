@@ -528,6 +528,19 @@ void Requantize(DT d, size_t N, float* rows, int count, const float* mult, bool 
   }
 }
 
+// Rows [0, out) of y (a layer's sums without the direction inputs) plus
+// the direction terms of the lanes' slots (output o's at dir[o * kDirRow],
+// picked by lanes), then the epilogue e (mult, lo, hi), in place.
+template <class DT, class Idx>
+HWY_INLINE void AddDirectionTerms(DT d, size_t N, float* y, int out, const float* dir, Idx lanes, const Epilogue& e) {
+  for (int o = 0; o < out; ++o) {
+    float* r = y + size_t(o) * N;
+    const hn::Vec<DT> t = hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o) * kDirRow), lanes);
+    const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), t), hn::Set(d, e.mult[o])));
+    hn::Store(hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi)), d, r);
+  }
+}
+
 // The chip's arithmetic in the byte form (RunNet<true> with q): each
 // layer's inputs packed 4 to a word (PackBytes), and a hidden layer whose
 // outputs are all the next layer's byte-form inputs writes them packed
@@ -560,12 +573,7 @@ void RunNetBytes(DT d, size_t N, const std::vector<FastLayer>& net, const float*
     e.hi = hidden ? 127.f : 32767.f;
     if (dir) {
       DenseBytes(d, N, xq, L, q, y, Epilogue());
-      for (int o = 0; o < L.out; ++o) {
-        float* r = y + size_t(o) * N;
-        const hn::Vec<DT> t = hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o) * kDirRow), lanes);
-        const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), t), hn::Set(d, e.mult[o])));
-        hn::Store(hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi)), d, r);
-      }
+      AddDirectionTerms(d, N, y, L.out, dir, lanes, e);
     } else {
       DenseBytes(d, N, xq, L, q, y, e);
     }
@@ -614,12 +622,7 @@ void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, c
       Dense<true>(d, N, x, L.in, 0, split, p + L.w, p + L.b, L.out, y);
       const hn::RebindToSigned<DT> di;
       const auto lanes = hn::IndicesFromVec(d, hn::Load(di, slots));
-      for (int o = 0; o < L.out; ++o) {
-        float* r = y + size_t(o) * N;
-        const hn::Vec<DT> t = hn::TableLookupLanes(hn::LoadU(d, dir_q + size_t(o) * kDirRow), lanes);
-        const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), t), hn::Set(d, e.mult[o])));
-        hn::Store(hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi)), d, r);
-      }
+      AddDirectionTerms(d, N, y, L.out, dir_q, lanes, e);
     } else {
       Dense<kInt8>(d, N, x, L.in, 0, L.in, p + L.w, p + L.b, L.out, y, e);
     }
