@@ -1,0 +1,308 @@
+// Highway kernels of the fast renderer's MLP layers (render/fast_kernels.cpp
+// includes this once per SIMD target): the dense layers in float lanes
+// (Dense), their INT8 byte form on AVX-512 VNNI (DenseBytes and the
+// packing of inputs and outputs, FastModel::quads), requantization and
+// the colour net's per-ray direction terms. Per-target include guard, as
+// Highway's -inl.h headers have it.
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+
+#include "render/fast_model.h"
+
+#if defined(EDRNR_RENDER_FAST_LAYERS_INL_H_) == defined(HWY_TARGET_TOGGLE)
+#ifdef EDRNR_RENDER_FAST_LAYERS_INL_H_
+#undef EDRNR_RENDER_FAST_LAYERS_INL_H_
+#else
+#define EDRNR_RENDER_FAST_LAYERS_INL_H_
+#endif
+
+#include <hwy/highway.h>
+
+HWY_BEFORE_NAMESPACE();
+namespace edrnr {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+// Room for the widest vector of any target.
+constexpr size_t kCap = HWY_MAX_BYTES / sizeof(float);
+// Int8: samples are run in segments of at most this many, whose rays' direction
+// parts are computed once per ray (slot) before the samples' chunks.
+constexpr size_t kSegment = 256;
+constexpr size_t kDirRow = kSegment + kCap;  // a row of dir_q: a vector load from any slot stays inside
+
+// What a layer does to its sums before they are stored: nothing (mult null,
+// relu false), ReLU (float), or clamp(round(sum * mult[row]), lo, hi) (Int8:
+// the next layer's INT8 input, or raw outputs in 1/256 steps).
+struct Epilogue {
+  const float* mult = nullptr;
+  float lo = 0.f, hi = 0.f;
+  bool relu = false;
+};
+
+// ACC rows [o, o + NB) = epilogue((B ? bias : 0) + W[o.., i0..i1) X[i0..i1)),
+// one product at a time in input order. kFma: fused multiply-add (the Int8
+// path, whose products and sums are exact integers); otherwise multiply then
+// add, the reference's rounding.
+template <int NB, bool kFma, class DT>
+HWY_INLINE void DenseBlock(DT d, size_t N, const float* X, int in, int i0, int i1, const float* W, const float* B,
+                           int o, float* ACC, const Epilogue& e) {
+  hn::Vec<DT> acc[NB];
+  for (int k = 0; k < NB; ++k) acc[k] = B ? hn::Set(d, B[o + k]) : hn::Zero(d);
+  for (int i = i0; i < i1; ++i) {
+    const hn::Vec<DT> x = hn::Load(d, X + size_t(i) * N);
+    for (int k = 0; k < NB; ++k) {
+      const hn::Vec<DT> w = hn::Set(d, W[size_t(o + k) * size_t(in) + size_t(i)]);
+      acc[k] = kFma ? hn::MulAdd(w, x, acc[k]) : hn::Add(acc[k], hn::Mul(w, x));
+    }
+  }
+  for (int k = 0; k < NB; ++k) {
+    hn::Vec<DT> v = acc[k];
+    if (e.mult) {
+      v = hn::Round(hn::Mul(v, hn::Set(d, e.mult[o + k])));
+      v = hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi));
+    } else if (e.relu) {
+      v = hn::Max(v, hn::Zero(d));
+    }
+    hn::Store(v, d, ACC + size_t(o + k) * N);
+  }
+}
+
+template <bool kFma, class DT>
+void Dense(DT d, size_t N, const float* X, int in, int i0, int i1, const float* W, const float* B, int out, float* ACC,
+           const Epilogue& e = Epilogue()) {
+  int o = 0;
+  for (; o + 8 <= out; o += 8) DenseBlock<8, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
+  if (o + 4 <= out) {
+    DenseBlock<4, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
+    o += 4;
+  }
+  if (o + 2 <= out) {
+    DenseBlock<2, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
+    o += 2;
+  }
+  if (o < out) DenseBlock<1, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
+}
+
+#if HWY_TARGET == HWY_AVX3_DL
+// acc plus, per 32-bit lane, the 4 products of u's unsigned bytes and the
+// signed bytes of the word *w, broadcast to every lane (VPDPBUSD of AVX-512
+// VNNI with a broadcast memory operand; the model has its byte form only
+// where the CPU has that instruction, see FastModel::quads).
+template <class V>
+HWY_INLINE V DotBytes(V acc, V u, const int32_t* w) {
+  auto r = acc.raw;
+  if constexpr (sizeof(r) == 64)
+    asm("vpdpbusd %2%{1to16%}, %1, %0" : "+v"(r) : "v"(u.raw), "m"(*w));
+  else
+    asm("vpdpbusd %2%{1to8%}, %1, %0" : "+v"(r) : "v"(u.raw), "m"(*w));
+  acc.raw = r;
+  return acc;
+}
+constexpr bool kHaveDotBytes = true;
+
+// round(v) as int32 lanes, v already within the int32 range (the conversion
+// rounds to nearest even, as hn::Round).
+template <class DT>
+HWY_INLINE hn::Vec<hn::RebindToSigned<DT>> RoundToInt(DT d, hn::Vec<DT> v) {
+  hn::Vec<hn::RebindToSigned<DT>> r = hn::Zero(hn::RebindToSigned<DT>());
+  if constexpr (sizeof(v.raw) == 64)
+    r.raw = _mm512_cvtps_epi32(v.raw);
+  else if constexpr (sizeof(v.raw) == 32)
+    r.raw = _mm256_cvtps_epi32(v.raw);
+  else
+    r = hn::NearestInt(v);
+  (void)d;
+  return r;
+}
+
+// The sums bias + W X of outputs [o, o + NB) in the byte form: the inputs in
+// xq (4 per word, plus 128), the weight words wq, the bias words bq (which
+// take the 128 back out). Every sum is an exact integer, as in Dense<true>.
+template <int NB, class DI>
+HWY_INLINE void ByteSums(DI di, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq, int o,
+                         hn::Vec<DI>* acc) {
+  for (int k = 0; k < NB; ++k) acc[k] = hn::Set(di, bq[o + k]);
+  for (int j = 0; j < words; ++j) {
+    const auto u = hn::Load(di, xq + size_t(j) * N);
+    for (int k = 0; k < NB; ++k) acc[k] = DotBytes(acc[k], u, wq + size_t(o + k) * size_t(words) + size_t(j));
+  }
+}
+
+// DenseBlock in the byte form: ACC rows [o, o + NB) = epilogue(bias + W X),
+// row r at ACC + r * stride (N when 0): the results of DenseBlock<NB, true>.
+template <int NB, class DT>
+HWY_INLINE void DenseBytesBlock(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq,
+                                int o, float* ACC, const Epilogue& e, size_t stride = 0) {
+  if (stride == 0) stride = N;
+  const hn::RebindToSigned<DT> di;
+  hn::Vec<decltype(di)> acc[NB];
+  ByteSums<NB>(di, N, xq, words, wq, bq, o, acc);
+  for (int k = 0; k < NB; ++k) {
+    hn::Vec<DT> v = hn::ConvertTo(d, acc[k]);
+    if (e.mult) {
+      v = hn::Round(hn::Mul(v, hn::Set(d, e.mult[o + k])));
+      v = hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi));
+    }
+    hn::Store(v, d, ACC + size_t(o + k) * stride);
+  }
+}
+
+// A hidden layer's outputs [o, o + NB) (NB a multiple of 4) straight into
+// the next layer's byte form: clamp(round(mult (sum + dir)), 0, 127) plus
+// 128, 4 outputs per word of xq_out. dir (null: none): the colour net's
+// direction terms, output r's of the lanes' slots at dir[r * kDirRow]
+// picked by `lanes`. The values are those of DenseBytesBlock's epilogue (the
+// bounds are integers, so clamping before or after rounding is the same)
+// and of the next layer's packing (DenseBytes).
+template <int NB, class DT, class Idx>
+HWY_INLINE void DenseBytesToBytes(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq,
+                                  int o, const float* mult, const float* dir, Idx lanes, int32_t* xq_out) {
+  static_assert(NB % 4 == 0, "whole words");
+  const hn::RebindToSigned<DT> di;
+  hn::Vec<decltype(di)> acc[NB];
+  ByteSums<NB>(di, N, xq, words, wq, bq, o, acc);
+  const hn::Vec<DT> lo = hn::Zero(d), hi = hn::Set(d, 127.f);
+  for (int g = 0; g < NB; g += 4) {
+    hn::Vec<decltype(di)> word = hn::Set(di, int32_t(0x80808080u));  // the 128 of every byte (values below 128)
+    for (int b = 0; b < 4; ++b) {
+      const int k = g + b;
+      hn::Vec<DT> v = hn::ConvertTo(d, acc[k]);
+      if (dir) v = hn::Add(v, hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o + k) * kDirRow), lanes));
+      v = hn::Min(hn::Max(hn::Mul(v, hn::Set(d, mult[o + k])), lo), hi);
+      word = hn::Or(word, hn::ShiftLeftSame(RoundToInt(d, v), 8 * b));
+    }
+    hn::Store(word, di, xq_out + size_t(o + g) / 4 * N);
+  }
+}
+
+// The byte form of input rows [0, rows) of X (integers in [-128, 127]): 4
+// per word, plus 128: ceil(rows / 4) rows of N words.
+template <class DT>
+void PackBytes(DT d, size_t N, const float* X, int rows, int32_t* xq) {
+  const hn::RebindToSigned<DT> di;
+  const auto offset = hn::Set(di, 128);
+  for (int j = 0; 4 * j < rows; ++j) {
+    auto u = hn::Zero(di);
+    for (int k = 0; k < 4 && 4 * j + k < rows; ++k) {
+      const auto x = hn::Add(hn::ConvertTo(di, hn::Load(d, X + size_t(4 * j + k) * N)), offset);
+      u = hn::Or(u, hn::ShiftLeftSame(x, 8 * k));
+    }
+    hn::Store(u, di, xq + size_t(j) * N);
+  }
+}
+
+// PackBytes of the rows clamp(round(X * m), -128, 127) (Requantize's
+// values, which are not stored), rows [0, rows).
+template <class DT>
+void PackBytesScaled(DT d, size_t N, const float* X, int rows, float m, int32_t* xq) {
+  const hn::RebindToSigned<DT> di;
+  const auto offset = hn::Set(di, 128);
+  const hn::Vec<DT> mv = hn::Set(d, m), lo = hn::Set(d, -128.f), hi = hn::Set(d, 127.f);
+  for (int j = 0; 4 * j < rows; ++j) {
+    auto u = hn::Zero(di);
+    for (int k = 0; k < 4 && 4 * j + k < rows; ++k) {
+      const hn::Vec<DT> v = hn::Min(hn::Max(hn::Mul(hn::Load(d, X + size_t(4 * j + k) * N), mv), lo), hi);
+      u = hn::Or(u, hn::ShiftLeftSame(hn::Add(RoundToInt(d, v), offset), 8 * k));
+    }
+    hn::Store(u, di, xq + size_t(j) * N);
+  }
+}
+
+// Dense<true> over inputs [0, L.q_in), already in the byte form in xq (q:
+// the MLP's words), into rows of ACC.
+template <class DT>
+void DenseBytes(DT d, size_t N, const int32_t* xq, const FastLayer& L, const int32_t* q, float* ACC,
+                const Epilogue& e) {
+  const int words = (L.q_in + 3) / 4;
+  const int32_t* wq = q + L.wq;
+  const int32_t* bq = q + L.bq;
+  int o = 0;
+  for (; o + 8 <= L.out; o += 8) DenseBytesBlock<8>(d, N, xq, words, wq, bq, o, ACC, e);
+  if (o + 4 <= L.out) {
+    DenseBytesBlock<4>(d, N, xq, words, wq, bq, o, ACC, e);
+    o += 4;
+  }
+  for (; o < L.out; ++o) DenseBytesBlock<1>(d, N, xq, words, wq, bq, o, ACC, e);
+}
+
+// A hidden layer (L.out a multiple of 4) from the byte form in xq to the
+// next layer's byte form in xq_out (DenseBytesToBytes), with the direction
+// terms dir picked by lanes when dir is not null.
+template <class DT, class Idx>
+void DenseBytesHidden(DT d, size_t N, const int32_t* xq, const FastLayer& L, const int32_t* q, const float* mult,
+                      const float* dir, Idx lanes, int32_t* xq_out) {
+  const int words = (L.q_in + 3) / 4;
+  const int32_t* wq = q + L.wq;
+  const int32_t* bq = q + L.bq;
+  int o = 0;
+  for (; o + 8 <= L.out; o += 8) DenseBytesToBytes<8>(d, N, xq, words, wq, bq, o, mult, dir, lanes, xq_out);
+  for (; o < L.out; o += 4) DenseBytesToBytes<4>(d, N, xq, words, wq, bq, o, mult, dir, lanes, xq_out);
+}
+
+// DirectionParts' sums in the byte form: output o of the vector's slots at
+// dir_q[o * kDirRow] = round(m * (bq[o] + W_o . X)) from the packed
+// direction bytes xq (words rows of N lanes) and the weight words wq (out
+// outputs). The sums are exact integers, as in the float form
+// (Dense<true>), so the results are the same.
+template <class DT>
+void DirectionBytes(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq, int out,
+                    float m, float* dir_q) {
+  float mult[kFastMaxWidth];
+  std::fill(mult, mult + out, m);
+  Epilogue e;  // rounded, not clamped
+  e.mult = mult;
+  e.lo = -std::numeric_limits<float>::infinity();
+  e.hi = std::numeric_limits<float>::infinity();
+  int o = 0;
+  for (; o + 4 <= out; o += 4) DenseBytesBlock<4>(d, N, xq, words, wq, bq, o, dir_q, e, kDirRow);
+  for (; o < out; ++o) DenseBytesBlock<1>(d, N, xq, words, wq, bq, o, dir_q, e, kDirRow);
+}
+#else
+constexpr bool kHaveDotBytes = false;
+template <class DT>
+HWY_INLINE hn::Vec<hn::RebindToSigned<DT>> RoundToInt(DT, hn::Vec<DT> v) {
+  return hn::NearestInt(v);
+}
+template <class DT>
+void PackBytes(DT, size_t, const float*, int, int32_t*) {}
+template <class DT>
+void PackBytesScaled(DT, size_t, const float*, int, float, int32_t*) {}
+template <class DT>
+void DenseBytes(DT, size_t, const int32_t*, const FastLayer&, const int32_t*, float*, const Epilogue&) {}
+template <class DT, class Idx>
+void DenseBytesHidden(DT, size_t, const int32_t*, const FastLayer&, const int32_t*, const float*, const float*, Idx,
+                      int32_t*) {}
+template <class DT>
+void DirectionBytes(DT, size_t, const int32_t*, int, const int32_t*, const int32_t*, int, float, float*) {}
+#endif
+// rows[r] = clamp(round(rows[r] * mult[r or 0]), lo, hi) for r < count.
+template <class DT>
+void Requantize(DT d, size_t N, float* rows, int count, const float* mult, bool per_row, float lo, float hi) {
+  for (int r = 0; r < count; ++r) {
+    const hn::Vec<DT> m = hn::Set(d, mult[per_row ? r : 0]);
+    float* p = rows + size_t(r) * N;
+    const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Load(d, p), m));
+    hn::Store(hn::Min(hn::Max(v, hn::Set(d, lo)), hn::Set(d, hi)), d, p);
+  }
+}
+
+// Rows [0, out) of y (a layer's sums without the direction inputs) plus
+// the direction terms of the lanes' slots (output o's at dir[o * kDirRow],
+// picked by lanes), then the epilogue e (mult, lo, hi), in place.
+template <class DT, class Idx>
+HWY_INLINE void AddDirectionTerms(DT d, size_t N, float* y, int out, const float* dir, Idx lanes, const Epilogue& e) {
+  for (int o = 0; o < out; ++o) {
+    float* r = y + size_t(o) * N;
+    const hn::Vec<DT> t = hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o) * kDirRow), lanes);
+    const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), t), hn::Set(d, e.mult[o])));
+    hn::Store(hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi)), d, r);
+  }
+}
+
+}  // namespace HWY_NAMESPACE
+}  // namespace edrnr
+HWY_AFTER_NAMESPACE();
+
+#endif  // EDRNR_RENDER_FAST_LAYERS_INL_H_
