@@ -1,5 +1,9 @@
 #include "train/feature_grid.h"
 
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
 #include <omp.h>
 
 #include <algorithm>
@@ -103,6 +107,25 @@ void FeaturePyramid::prefetch(const Vec3i& m) const {
   }
 }
 
+namespace {
+// gv[k] += w * g[k] for the 4 channels of a vertex (a product, then a sum,
+// as the scalar loop); true if the row was all zeros (of either sign)
+// before and is not after (the vertex is touched now).
+inline bool add_row4(float* gv, float w, const float* g) {
+#if defined(__SSE2__)
+  const __m128 zero = _mm_setzero_ps();
+  const __m128 old = _mm_loadu_ps(gv);
+  const __m128 sum = _mm_add_ps(old, _mm_mul_ps(_mm_set1_ps(w), _mm_loadu_ps(g)));
+  _mm_storeu_ps(gv, sum);
+  return _mm_movemask_ps(_mm_cmpeq_ps(old, zero)) == 0xF && _mm_movemask_ps(_mm_cmpeq_ps(sum, zero)) != 0xF;
+#else
+  const bool was_zero = gv[0] == 0.f && gv[1] == 0.f && gv[2] == 0.f && gv[3] == 0.f;
+  for (int k = 0; k < kLevelChannels; ++k) gv[k] += w * g[k];
+  return was_zero && (gv[0] != 0.f || gv[1] != 0.f || gv[2] != 0.f || gv[3] != 0.f);
+#endif
+}
+}  // namespace
+
 void FeaturePyramid::scatter_gradients(const GradientSlabs& slabs, const std::vector<float>& pos,
                                        const std::vector<int16_t>& micro, const std::vector<float>& d_feat) {
   const int F = channels();
@@ -147,11 +170,7 @@ void FeaturePyramid::scatter_gradients(const GradientSlabs& slabs, const std::ve
             if (vz < vz_lo || vz > vz_hi) continue;
             for (int c = 4 * dz; c < 4 * dz + 4; ++c) {
               const size_t vtx = L.vertex_index(cx + (c & 1), cy + ((c >> 1) & 1), vz);
-              float* gv = &L.adam.grad[vtx * kLevelChannels];
-              const bool was_zero = gv[0] == 0.f && gv[1] == 0.f && gv[2] == 0.f && gv[3] == 0.f;
-              for (int k = 0; k < kLevelChannels; ++k) gv[k] += w[c] * g[k];
-              if (was_zero && (gv[0] != 0.f || gv[1] != 0.f || gv[2] != 0.f || gv[3] != 0.f))
-                list.push_back(int32_t(vtx));
+              if (add_row4(&L.adam.grad[vtx * kLevelChannels], w[c], g)) list.push_back(int32_t(vtx));
             }
           }
         }
