@@ -84,7 +84,8 @@ std::vector<TmeLayer> compile_net(const std::vector<DenseQ>& net, const std::vec
       for (int i = 0; i < d.in; ++i)
         t.abs_weight_sum[size_t(j)] += std::abs(int64_t(t.w[size_t(j) * size_t(d.in) + size_t(i)]));
     }
-    t.out_pad = int((size_t(t.out) + kTmeLanePad - 1) / kTmeLanePad * kTmeLanePad);
+    const size_t pad = tme_lane_pad();
+    t.out_pad = int((size_t(t.out) + pad - 1) / pad * pad);
     t.wt.assign(size_t(t.in) * size_t(t.out_pad), 0);
     for (int j = 0; j < t.out; ++j)
       for (int i = 0; i < t.in; ++i)

@@ -44,7 +44,7 @@ struct TmeLayer {
   std::vector<fx::Requant> requant;     // out: to the next layer's input, or to the raw output format
   std::vector<int64_t> abs_weight_sum;  // out: sum of |w| of each row (bounds the accumulator)
   // The same layer arranged for the batched GEMM (tme_kernel.h):
-  int out_pad = 0;                 // out rounded up to a multiple of kTmeLanePad
+  int out_pad = 0;                 // out rounded up to a multiple of tme_lane_pad()
   std::vector<int32_t> wt;         // in x out_pad: the weights transposed, padding zero
   std::vector<int16_t> wt_pairs;   // wt in tme_dot_columns_pairs' layout; empty when inputs may exceed int16
   std::vector<int64_t> bias_sat;   // out: the bias saturated to the accumulator

@@ -224,6 +224,7 @@ uint64_t AddTerms(int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t samples, 
 }
 
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
+size_t LanePad() { return hn::Lanes(hn::ScalableTag<int32_t>()); }
 
 }  // namespace HWY_NAMESPACE
 }  // namespace edrnr::chip
@@ -238,6 +239,7 @@ HWY_EXPORT(RequantRelu);
 HWY_EXPORT(RequantSigned);
 HWY_EXPORT(AddTerms);
 HWY_EXPORT(TargetName);
+HWY_EXPORT(LanePad);
 
 void tme_dot_columns(const int32_t* wt, size_t out_pad, size_t i_begin, size_t i_end, const int32_t* x, size_t x_stride,
                      size_t samples, int32_t* y, size_t y_stride) {
@@ -282,6 +284,13 @@ uint64_t tme_add_terms(int32_t* sum, size_t sum_stride, size_t samples, size_t c
 }
 
 const char* tme_kernel_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
+
+size_t tme_lane_pad() {
+  const size_t n = HWY_DYNAMIC_DISPATCH(LanePad)();
+  if (n == 0 || n > kTmeLanePad || kTmeLanePad % n != 0)
+    throw std::logic_error("tme_lane_pad: the SIMD target's int32 lanes do not divide kTmeLanePad");
+  return n;
+}
 
 }  // namespace edrnr::chip
 #endif

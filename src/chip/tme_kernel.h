@@ -7,15 +7,19 @@
 
 namespace edrnr::chip {
 
-// Output rows of a transposed weight matrix are padded to a multiple of this
-// (the lanes of the widest int32 vector).
+// Output rows of a transposed weight matrix are padded to a multiple of
+// tme_lane_pad(): the int32 lanes of the SIMD target the dispatch picks, at
+// most this (the lanes of the widest int32 vector). Padding to the target's
+// own width spares the narrower targets columns of zeros (an 8-output layer
+// is one AVX2 vector, not two).
 inline constexpr size_t kTmeLanePad = 16;
+size_t tme_lane_pad();
 
 // For each of `samples` input rows x_s = x + s * x_stride and each output j <
 // out_pad:
 //   y[s * y_stride + j] = sum_{i in [i_begin, i_end)} wt[i * out_pad + j] * x_s[i]
 // in int32 arithmetic. wt is the weight matrix transposed (input-major, out_pad
-// a multiple of kTmeLanePad, padding zero). Exact when every partial sum fits
+// a multiple of tme_lane_pad(), padding zero). Exact when every partial sum fits
 // int32 (the caller's contract: |w| <= 2^7, |x| <= 2^15 and at most 2^8 inputs
 // give |sum| <= 2^30).
 void tme_dot_columns(const int32_t* wt, size_t out_pad, size_t i_begin, size_t i_end, const int32_t* x, size_t x_stride,
