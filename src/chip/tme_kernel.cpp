@@ -115,7 +115,6 @@ uint64_t RequantRelu(const int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t 
   const size_t n = hn::Lanes(d64);
   const auto max_out = hn::Set(d64, (uint64_t(1) << (out_bits - 1)) - 1);
   uint64_t saturations = 0;
-  HWY_ALIGN uint64_t lanes[HWY_MAX_BYTES / sizeof(uint64_t)];
   for (size_t s = 0; s < samples; ++s) {
     const int32_t* ss = sum + s * sum_stride;
     int32_t* ys = y + s * y_stride;
@@ -127,8 +126,7 @@ uint64_t RequantRelu(const int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t 
       const auto r = hn::Add(p, hn::LoadU(d64, half + j)) >> hn::LoadU(d64, shift + j);
       const auto fits = hn::Eq(hn::ShiftRightSame(r, out_bits - 1), hn::Zero(d64));
       saturations += n - hn::CountTrue(d64, fits);
-      hn::Store(hn::IfThenElse(fits, r, max_out), d64, lanes);
-      for (size_t l = 0; l < n; ++l) ys[j + l] = int32_t(lanes[l]);
+      hn::StoreU(hn::BitCast(d32h, hn::TruncateTo(du32h, hn::IfThenElse(fits, r, max_out))), d32h, ys + j);
     }
   }
   return saturations;
@@ -150,13 +148,30 @@ uint64_t RequantSigned(const int32_t* HWY_RESTRICT x, size_t x_stride, size_t sa
   const hn::Rebind<uint32_t, decltype(d64)> du32h;
   const hn::Repartition<int32_t, decltype(d64)> d32;
   const size_t n = hn::Lanes(d64);
-  vector_end = count / n * n;
+  // A last partial vector runs masked: its other lanes load zeros (and
+  // compute zeros), are not stored and not counted.
+  vector_end = count;
+  const size_t whole = count / n * n;
   const auto hi_v = hn::Set(d64, hi), lo_v = hn::Set(d64, lo);
-  HWY_ALIGN int64_t lanes[HWY_MAX_BYTES / sizeof(int64_t)];
+  auto one = [&](const int32_t* xs, int32_t* ys, size_t j, size_t valid) {
+    const auto m32 = hn::FirstN(d32h, valid);
+    const auto m64 = hn::FirstN(d64, valid);
+    const auto v = hn::Add(hn::PromoteTo(d64, hn::MaskedLoad(m32, d32h, xs + j)),
+                           hn::PromoteTo(d64, hn::MaskedLoad(m32, d32h, bias + j)));
+    const auto m = hn::BitCast(d64, hn::PromoteTo(du64, hn::MaskedLoad(hn::RebindMask(du32h, m32), du32h, mult + j)));
+    const auto p = hn::MulEven(hn::BitCast(d32, v), hn::BitCast(d32, m));
+    const auto t = hn::Add(p, hn::BitCast(d64, hn::MaskedLoad(hn::RebindMask(du64, m64), du64, half + j)));
+    const auto sign = hn::BroadcastSignBit(t);
+    const auto u = hn::BitCast(du64, hn::Xor(t, sign)) >> hn::MaskedLoad(hn::RebindMask(du64, m64), du64, shift + j);
+    const auto r = hn::Xor(hn::BitCast(d64, u), sign);
+    const auto c = hn::Min(hn::Max(r, lo_v), hi_v);
+    saturations += hn::CountTrue(d64, hn::AndNot(hn::Eq(r, c), m64));
+    hn::BlendedStore(hn::BitCast(d32h, hn::TruncateTo(du32h, hn::BitCast(du64, c))), m32, d32h, ys + j);
+  };
   for (size_t s = 0; s < samples; ++s) {
     const int32_t* xs = x + s * x_stride;
     int32_t* ys = y + s * y_stride;
-    for (size_t j = 0; j < vector_end; j += n) {
+    for (size_t j = 0; j < whole; j += n) {
       const auto v =
           hn::Add(hn::PromoteTo(d64, hn::LoadU(d32h, xs + j)), hn::PromoteTo(d64, hn::LoadU(d32h, bias + j)));
       const auto m = hn::BitCast(d64, hn::PromoteTo(du64, hn::LoadU(du32h, mult + j)));
@@ -167,9 +182,9 @@ uint64_t RequantSigned(const int32_t* HWY_RESTRICT x, size_t x_stride, size_t sa
       const auto r = hn::Xor(hn::BitCast(d64, u), sign);
       const auto c = hn::Min(hn::Max(r, lo_v), hi_v);
       saturations += n - hn::CountTrue(d64, hn::Eq(r, c));
-      hn::Store(c, d64, lanes);
-      for (size_t l = 0; l < n; ++l) ys[j + l] = int32_t(lanes[l]);
+      hn::StoreU(hn::BitCast(d32h, hn::TruncateTo(du32h, hn::BitCast(du64, c))), d32h, ys + j);
     }
+    if (whole < count) one(xs, ys, whole, count - whole);
   }
 #endif
   if (vector_end < count) {
@@ -194,10 +209,11 @@ uint64_t AddTerms(int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t samples, 
 #if HWY_TARGET != HWY_SCALAR
   const hn::ScalableTag<int64_t> d64;
   const hn::Rebind<int32_t, decltype(d64)> d32h;
+  const hn::Rebind<uint32_t, decltype(d64)> du32h;
+  const hn::RebindToUnsigned<decltype(d64)> du64;
   const size_t n = hn::Lanes(d64);
   vector_end = count / n * n;
   const auto hi_v = hn::Set(d64, hi), lo_v = hn::Set(d64, lo);
-  HWY_ALIGN int64_t lanes[HWY_MAX_BYTES / sizeof(int64_t)];
   for (size_t s = 0; s < samples; ++s) {
     int32_t* ss = sum + s * sum_stride;
     const int64_t* ts = terms[s];
@@ -206,8 +222,7 @@ uint64_t AddTerms(int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t samples, 
                              hn::LoadU(d64, ts + j));
       const auto c = hn::Min(hn::Max(v, lo_v), hi_v);
       saturations += n - hn::CountTrue(d64, hn::Eq(v, c));
-      hn::Store(c, d64, lanes);
-      for (size_t l = 0; l < n; ++l) ss[j + l] = int32_t(lanes[l]);
+      hn::StoreU(hn::BitCast(d32h, hn::TruncateTo(du32h, hn::BitCast(du64, c))), d32h, ss + j);
     }
   }
 #endif

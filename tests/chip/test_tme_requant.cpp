@@ -85,8 +85,8 @@ TEST(TmeDotColumnsPairs, MatchesTheScalarSumsOnEveryTarget) {
 // tme_requant_signed against fx::requantize (the exact 128-bit product and
 // its rounding) and fx::saturate, on random signed values, biases,
 // multipliers and shifts, with floor and half-up rounding, a row length that
-// leaves a partial vector, on every SIMD target this build has and the CPU
-// runs.
+// leaves a partial vector (whose other lanes must stay unwritten), on every
+// SIMD target this build has and the CPU runs.
 TEST(TmeRequantSigned, MatchesRequantizeOnEveryTarget) {
   constexpr size_t kStride = 64, kCount = 45, kSamples = 4;
   std::mt19937_64 rng(11);
@@ -107,8 +107,13 @@ TEST(TmeRequantSigned, MatchesRequantizeOnEveryTarget) {
         shift[j] = uint64_t(q[j].shift);
         half[j] = mode == fx::Rounding::HalfUp ? (uint64_t(1) << shift[j]) >> 1 : 0;
       }
+      constexpr int32_t kUntouched = 0x5a5a5a5a;
+      std::fill(y.begin(), y.end(), kUntouched);
       const uint64_t clamped = tme_requant_signed(x.data(), kStride, kSamples, kCount, bias.data(), mult.data(),
                                                   half.data(), shift.data(), out_bits, y.data(), kStride);
+      for (size_t s = 0; s < kSamples; ++s)
+        for (size_t j = kCount; j < kStride; ++j)
+          ASSERT_EQ(y[s * kStride + j], kUntouched) << tme_kernel_target() << " sample " << s << " lane " << j;
       uint64_t expected_clamped = 0;
       for (size_t s = 0; s < kSamples; ++s)
         for (size_t j = 0; j < kCount; ++j) {
