@@ -9,8 +9,10 @@ template <class T>
 struct Vec3 {
   T x{}, y{}, z{};
 
-  constexpr T& operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
-  constexpr const T& operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
+  // Component i in [0, 3): a member looked up in a table (one load and an
+  // add where i is not known at compile time, not two compares).
+  constexpr T& operator[](int i) { return this->*kAxis[i]; }
+  constexpr const T& operator[](int i) const { return this->*kAxis[i]; }
   constexpr Vec3 operator+(const Vec3& o) const { return {x + o.x, y + o.y, z + o.z}; }
   constexpr Vec3 operator-(const Vec3& o) const { return {x - o.x, y - o.y, z - o.z}; }
   constexpr Vec3 operator*(const Vec3& o) const { return {x * o.x, y * o.y, z * o.z}; }
@@ -18,11 +20,21 @@ struct Vec3 {
   constexpr Vec3 operator*(T s) const { return {x * s, y * s, z * s}; }
   constexpr Vec3 operator/(T s) const { return {x / s, y / s, z / s}; }
   constexpr Vec3 operator-() const { return {-x, -y, -z}; }
-  constexpr Vec3& operator+=(const Vec3& o) { x += o.x; y += o.y; z += o.z; return *this; }
+  constexpr Vec3& operator+=(const Vec3& o) {
+    x += o.x;
+    y += o.y;
+    z += o.z;
+    return *this;
+  }
   constexpr bool operator==(const Vec3& o) const = default;
 
   template <class U>
-  constexpr Vec3<U> cast() const { return {U(x), U(y), U(z)}; }
+  constexpr Vec3<U> cast() const {
+    return {U(x), U(y), U(z)};
+  }
+
+ private:
+  static constexpr T Vec3::*kAxis[3] = {&Vec3::x, &Vec3::y, &Vec3::z};
 };
 
 using Vec3f = Vec3<float>;
@@ -30,15 +42,21 @@ using Vec3d = Vec3<double>;
 using Vec3i = Vec3<int>;
 
 template <class T>
-constexpr T dot(const Vec3<T>& a, const Vec3<T>& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+constexpr T dot(const Vec3<T>& a, const Vec3<T>& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
 template <class T>
 constexpr Vec3<T> cross(const Vec3<T>& a, const Vec3<T>& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 template <class T>
-T length(const Vec3<T>& a) { return std::sqrt(dot(a, a)); }
+T length(const Vec3<T>& a) {
+  return std::sqrt(dot(a, a));
+}
 template <class T>
-Vec3<T> normalize(const Vec3<T>& a) { return a / length(a); }
+Vec3<T> normalize(const Vec3<T>& a) {
+  return a / length(a);
+}
 template <class T>
 constexpr Vec3<T> vmin(const Vec3<T>& a, const Vec3<T>& b) {
   return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)};
