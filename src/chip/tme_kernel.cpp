@@ -4,6 +4,7 @@
 
 #include <cstring>
 #include <stdexcept>
+#include <utility>
 
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "chip/tme_kernel.cpp"
@@ -91,6 +92,18 @@ void DotColumnsPairs(const int16_t* HWY_RESTRICT wp, const int32_t* HWY_RESTRICT
 #endif
 }
 
+#if HWY_TARGET != HWY_SCALAR
+// The int64 lanes of v, each within the int32 range, as int32 lanes (one
+// truncating conversion).
+template <class V>
+HWY_INLINE auto Int32Of(V v) {
+  const hn::DFromV<V> d64;
+  const hn::Rebind<int32_t, decltype(d64)> d32h;
+  return hn::BitCast(d32h, hn::TruncateTo(hn::Rebind<uint32_t, decltype(d64)>(),
+                                          hn::BitCast(hn::RebindToUnsigned<decltype(d64)>(), v)));
+}
+#endif
+
 // tme_requant_relu (tme_kernel.h); the scalar target computes it lane by lane.
 uint64_t RequantRelu(const int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t samples,
                      const int32_t* HWY_RESTRICT bias, const uint32_t* HWY_RESTRICT mult,
@@ -126,7 +139,7 @@ uint64_t RequantRelu(const int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t 
       const auto r = hn::Add(p, hn::LoadU(d64, half + j)) >> hn::LoadU(d64, shift + j);
       const auto fits = hn::Eq(hn::ShiftRightSame(r, out_bits - 1), hn::Zero(d64));
       saturations += n - hn::CountTrue(d64, fits);
-      hn::StoreU(hn::BitCast(d32h, hn::TruncateTo(du32h, hn::IfThenElse(fits, r, max_out))), d32h, ys + j);
+      hn::StoreU(Int32Of(hn::IfThenElse(fits, r, max_out)), d32h, ys + j);
     }
   }
   return saturations;
@@ -153,38 +166,35 @@ uint64_t RequantSigned(const int32_t* HWY_RESTRICT x, size_t x_stride, size_t sa
   vector_end = count;
   const size_t whole = count / n * n;
   const auto hi_v = hn::Set(d64, hi), lo_v = hn::Set(d64, lo);
-  auto one = [&](const int32_t* xs, int32_t* ys, size_t j, size_t valid) {
-    const auto m32 = hn::FirstN(d32h, valid);
-    const auto m64 = hn::FirstN(d64, valid);
-    const auto v = hn::Add(hn::PromoteTo(d64, hn::MaskedLoad(m32, d32h, xs + j)),
-                           hn::PromoteTo(d64, hn::MaskedLoad(m32, d32h, bias + j)));
-    const auto m = hn::BitCast(d64, hn::PromoteTo(du64, hn::MaskedLoad(hn::RebindMask(du32h, m32), du32h, mult + j)));
-    const auto p = hn::MulEven(hn::BitCast(d32, v), hn::BitCast(d32, m));
-    const auto t = hn::Add(p, hn::BitCast(d64, hn::MaskedLoad(hn::RebindMask(du64, m64), du64, half + j)));
+  // round((v * mult + half) / 2^shift) clamped, from the lanes' operands.
+  auto requant = [&](auto v32, auto bias32, auto mult32, auto half64, auto shift64) {
+    const auto v = hn::Add(hn::PromoteTo(d64, v32), hn::PromoteTo(d64, bias32));
+    const auto m = hn::BitCast(d64, hn::PromoteTo(du64, mult32));
+    const auto t = hn::Add(hn::MulEven(hn::BitCast(d32, v), hn::BitCast(d32, m)), hn::BitCast(d64, half64));
     const auto sign = hn::BroadcastSignBit(t);
-    const auto u = hn::BitCast(du64, hn::Xor(t, sign)) >> hn::MaskedLoad(hn::RebindMask(du64, m64), du64, shift + j);
-    const auto r = hn::Xor(hn::BitCast(d64, u), sign);
+    const auto r = hn::Xor(hn::BitCast(d64, hn::BitCast(du64, hn::Xor(t, sign)) >> shift64), sign);
     const auto c = hn::Min(hn::Max(r, lo_v), hi_v);
-    saturations += hn::CountTrue(d64, hn::AndNot(hn::Eq(r, c), m64));
-    hn::BlendedStore(hn::BitCast(d32h, hn::TruncateTo(du32h, hn::BitCast(du64, c))), m32, d32h, ys + j);
+    return std::make_pair(c, hn::Eq(r, c));
   };
   for (size_t s = 0; s < samples; ++s) {
     const int32_t* xs = x + s * x_stride;
     int32_t* ys = y + s * y_stride;
     for (size_t j = 0; j < whole; j += n) {
-      const auto v =
-          hn::Add(hn::PromoteTo(d64, hn::LoadU(d32h, xs + j)), hn::PromoteTo(d64, hn::LoadU(d32h, bias + j)));
-      const auto m = hn::BitCast(d64, hn::PromoteTo(du64, hn::LoadU(du32h, mult + j)));
-      const auto p = hn::MulEven(hn::BitCast(d32, v), hn::BitCast(d32, m));
-      const auto t = hn::Add(p, hn::BitCast(d64, hn::LoadU(du64, half + j)));
-      const auto sign = hn::BroadcastSignBit(t);
-      const auto u = hn::BitCast(du64, hn::Xor(t, sign)) >> hn::LoadU(du64, shift + j);
-      const auto r = hn::Xor(hn::BitCast(d64, u), sign);
-      const auto c = hn::Min(hn::Max(r, lo_v), hi_v);
-      saturations += n - hn::CountTrue(d64, hn::Eq(r, c));
-      hn::StoreU(hn::BitCast(d32h, hn::TruncateTo(du32h, hn::BitCast(du64, c))), d32h, ys + j);
+      const auto [c, kept] = requant(hn::LoadU(d32h, xs + j), hn::LoadU(d32h, bias + j), hn::LoadU(du32h, mult + j),
+                                     hn::LoadU(du64, half + j), hn::LoadU(du64, shift + j));
+      saturations += n - hn::CountTrue(d64, kept);
+      hn::StoreU(Int32Of(c), d32h, ys + j);
     }
-    if (whole < count) one(xs, ys, whole, count - whole);
+    if (whole < count) {
+      const size_t j = whole;
+      const auto m32 = hn::FirstN(d32h, count - whole);
+      const auto m64 = hn::FirstN(du64, count - whole);
+      const auto [c, kept] = requant(hn::MaskedLoad(m32, d32h, xs + j), hn::MaskedLoad(m32, d32h, bias + j),
+                                     hn::MaskedLoad(hn::RebindMask(du32h, m32), du32h, mult + j),
+                                     hn::MaskedLoad(m64, du64, half + j), hn::MaskedLoad(m64, du64, shift + j));
+      saturations += hn::CountTrue(d64, hn::AndNot(kept, hn::RebindMask(d64, m64)));
+      hn::BlendedStore(Int32Of(c), m32, d32h, ys + j);
+    }
   }
 #endif
   if (vector_end < count) {
@@ -209,8 +219,6 @@ uint64_t AddTerms(int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t samples, 
 #if HWY_TARGET != HWY_SCALAR
   const hn::ScalableTag<int64_t> d64;
   const hn::Rebind<int32_t, decltype(d64)> d32h;
-  const hn::Rebind<uint32_t, decltype(d64)> du32h;
-  const hn::RebindToUnsigned<decltype(d64)> du64;
   const size_t n = hn::Lanes(d64);
   vector_end = count / n * n;
   const auto hi_v = hn::Set(d64, hi), lo_v = hn::Set(d64, lo);
@@ -222,7 +230,7 @@ uint64_t AddTerms(int32_t* HWY_RESTRICT sum, size_t sum_stride, size_t samples, 
                              hn::LoadU(d64, ts + j));
       const auto c = hn::Min(hn::Max(v, lo_v), hi_v);
       saturations += n - hn::CountTrue(d64, hn::Eq(v, c));
-      hn::StoreU(hn::BitCast(d32h, hn::TruncateTo(du32h, hn::BitCast(du64, c))), d32h, ss + j);
+      hn::StoreU(Int32Of(c), d32h, ss + j);
     }
   }
 #endif
