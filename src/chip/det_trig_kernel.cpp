@@ -59,10 +59,13 @@ void det_sin_cos(const double* x, size_t count, double* sin_out, double* cos_out
   alignas(64) double xs[kChunk], n[kChunk], sr[kChunk], cr[kChunk];
   for (size_t base = 0; base < count; base += kChunk) {
     const size_t m = std::min(kChunk, count - base);
-    for (size_t i = 0; i < kChunk; ++i) {
-      xs[i] = i < m ? x[base + i] : 0.0;
+    for (size_t i = 0; i < m; ++i) {
+      xs[i] = x[base + i];
       if (!(std::fabs(xs[i]) < 1048576.0)) fail("det_sin_cos: argument {} outside the supported range", xs[i]);
     }
+    // The tail of the last vector, as wide as the widest target's.
+    constexpr size_t kLanesMax = std::min<size_t>(kChunk, HWY_MAX_BYTES / sizeof(double));
+    std::fill(xs + m, xs + std::min(kChunk, (m + kLanesMax - 1) / kLanesMax * kLanesMax), 0.0);
     HWY_DYNAMIC_DISPATCH(SinCosSmall)
     (xs, m, det_trig_constants::kInvPio2, det_trig_constants::kPio2Hi, det_trig_constants::kPio2Lo, n, sr, cr);
     for (size_t i = 0; i < m; ++i) {

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "chip/chip_ray.h"
+#include "chip/tme.h"
 #include "chip/zorg.h"
 
 namespace edrnr::chip {
@@ -26,9 +27,9 @@ struct RayState {
   // Direction encoding codes (dir_dims values, Tme::encode_direction), once per ray.
   std::vector<int32_t> dir_code;
   // The TME's direction inputs made from dir_code (Tme::direction_input),
-  // kept by a consumer that evaluates the ray's samples in several batches.
-  std::vector<int32_t> dir_input;
-  uint64_t dir_input_saturations = 0;
+  // kept by a consumer that evaluates the ray's samples in several batches,
+  // with the direction terms of its latest MLP.
+  TmeDirection dir_input;
   // The FTU's face crossings of this ray (RayMath::ExitMemo), valid for
   // k_limit = exit_memo_limit: kept from one fine traversal to the next.
   RayMath::ExitMemo exit_memo;

@@ -246,6 +246,8 @@ uint64_t requantize_codes(const int32_t* code, size_t n, const fx::Requant& q, i
 }  // namespace
 
 void Tme::direction_input(const std::vector<int32_t>& dir_code, TmeDirection& out) const {
+  out.terms_tme = nullptr;  // the terms were those of other inputs
+  out.terms_mlp = -1;
   out.x.resize(dir_code.size());
   const int32_t* c = dir_code.data();
   const size_t n = dir_code.size();
@@ -265,20 +267,17 @@ void Tme::direction_input(const std::vector<int32_t>& dir_code, TmeDirection& ou
 
 TmeOutput Tme::eval(const int32_t* feature, const std::vector<int32_t>& dir_code) {
   direction_input(dir_code, eval_dir_);
-  const TmeDirection* d = &eval_dir_;
+  TmeDirection* d = &eval_dir_;
   TmeOutput out;
   eval_batch(1, feature, &d, &out);
   return out;
 }
 
-void Tme::eval_batch(size_t samples, const int32_t* features, const TmeDirection* const* dirs, TmeOutput* out) {
+void Tme::eval_batch(size_t samples, const int32_t* features, TmeDirection* const* dirs, TmeOutput* out) {
   if (current_ < 0) throw std::logic_error("TME eval: no MLP loaded");
   if (samples == 0) return;
   const size_t need = samples * size_t(kMaxLayerWidth);
-  if (term_of_sample_.size() < samples) {
-    term_of_sample_.resize(samples);
-    term_index_.resize(samples);
-  }
+  if (term_of_sample_.size() < samples) term_of_sample_.resize(samples);
   if (act_a_.size() < need) {
     act_a_.resize(need);
     act_b_.resize(need);
@@ -414,11 +413,12 @@ void Tme::direction_terms(const TmeLayer& L, int split, const fx::Requant& q, co
   int32_t* sum = abs_sum_.data();
   std::copy(d.x.begin(), d.x.end(), x + split);
   tme_dot_columns(L.wt.data(), size_t(L.out_pad), size_t(split), size_t(L.in), x, W, 1, sum, W);
+  t.term.resize(size_t(L.out));
   t.saturations = fx::saturate_requantize_row<M>(sum, size_t(L.out), n_.accumulator_bits, q, t.term.data());
 }
 
 template <fx::Rounding M>
-void Tme::eval_batch_as(size_t samples, const int32_t* features, const TmeDirection* const* dirs, TmeOutput* out) {
+void Tme::eval_batch_as(size_t samples, const int32_t* features, TmeDirection* const* dirs, TmeOutput* out) {
   const TmeMlp& m = mlps_[size_t(current_)];
   const int act = n_.activation_bits, outb = n_.mlp_output_bits;
   const size_t W = kMaxLayerWidth;
@@ -450,7 +450,6 @@ void Tme::eval_batch_as(size_t samples, const int32_t* features, const TmeDirect
   // Colour net input: density outputs, then the direction encoding.
   const int G = m.density.back().out;
   const bool geo_kernel = row_kernels && m.geo_row.vector;
-  size_t last_term = 0;
   if (geo_kernel)
     saturations += tme_requant_signed(x, W, samples, size_t(G), m.geo_row.bias.data(), m.geo_row.mult.data(),
                                       m.geo_row.half.data(), m.geo_row.shift.data(), act, y, W);
@@ -459,24 +458,18 @@ void Tme::eval_batch_as(size_t samples, const int32_t* features, const TmeDirect
     out[s].alpha = alpha_lut_(out[s].raw_density);
     if (!geo_kernel)
       for (int g = 0; g < G; ++g) y[s * W + size_t(g)] = in_stage(x[s * W + size_t(g)], m.geo_in);
-    const TmeDirection* d = dirs[s];
+    TmeDirection* d = dirs[s];
     saturations += d->saturations;
     if (m.color.empty()) continue;
-    // The ray's direction terms: those of the sample before (a ray's samples
-    // come together), else found among the batch's rays, or made.
-    size_t k = last_term;
-    if (k >= term_dirs_.size() || term_dirs_[k] != d)
-      for (k = 0; k < term_dirs_.size() && term_dirs_[k] != d;) ++k;
-    if (k == term_dirs_.size()) {
-      term_dirs_.push_back(d);
-      if (terms_.size() < term_dirs_.size()) terms_.resize(term_dirs_.size());
-      direction_terms<M>(m.color.front(), G, m.dir_in, *d, terms_[k]);
+    // The ray's direction terms: kept from its earlier samples in this MLP,
+    // or made now.
+    if (d->terms_tme != this || d->terms_mlp != current_) {
+      direction_terms<M>(m.color.front(), G, m.dir_in, *d, d->terms);
+      d->terms_tme = this;
+      d->terms_mlp = current_;
     }
-    term_index_[s] = uint32_t(k);
-    last_term = k;
+    term_of_sample_[s] = &d->terms;
   }
-  for (size_t s = 0; s < samples && !m.color.empty(); ++s) term_of_sample_[s] = &terms_[term_index_[s]];
-  term_dirs_.clear();
   std::swap(x, y);
   for (size_t l = 0; l < m.color.size(); ++l) {
     const bool hidden = l + 1 < m.color.size();

@@ -119,20 +119,27 @@ struct TmeCounters {
   uint64_t saturations = 0;  // accumulator or output values clipped
 };
 
-// A ray's direction as the colour net's INT8 inputs: computed once per ray
-// (Tme::direction_input) and used by each of its samples.
-struct TmeDirection {
-  std::vector<int32_t> x;    // dir_dims activation codes
-  uint64_t saturations = 0;  // codes clipped on the way (counted again per sample)
-};
-
 // What a ray's direction adds to each neuron of the first colour layer: the
 // direction products summed in an accumulator of their own, saturated and
 // brought to accumulator units. The same for every sample of the ray in one
-// MLP, so a batch computes it once per ray.
+// MLP, so it is computed once per ray and MLP.
 struct TmeDirTerms {
-  std::array<int64_t, kMaxLayerWidth> term{};
-  uint64_t saturations = 0;  // partial sums clipped (counted again per sample)
+  std::vector<int64_t> term;  // per neuron of the first colour layer
+  uint64_t saturations = 0;   // partial sums clipped (counted again per sample)
+};
+
+// A ray's direction as the colour net's INT8 inputs: computed once per ray
+// (Tme::direction_input) and used by each of its samples. It also keeps the
+// direction terms of the MLP that last evaluated it (Tme::eval_batch), so a
+// ray whose samples in one coarse voxel come in several batches has them
+// made once; direction_input() drops them.
+struct TmeDirection {
+  std::vector<int32_t> x;    // dir_dims activation codes
+  uint64_t saturations = 0;  // codes clipped on the way (counted again per sample)
+  // The terms and whose they are: the Tme and the index of its MLP.
+  TmeDirTerms terms;
+  const void* terms_tme = nullptr;
+  int32_t terms_mlp = -1;
 };
 
 class Tme {
@@ -156,8 +163,9 @@ class Tme {
   void direction_input(const std::vector<int32_t>& dir_code, TmeDirection& out) const;
   // Evaluates the current MLP on `samples` samples at once, as that many
   // eval() calls would (same outputs, same counters): features holds F values
-  // per sample, dirs[s] the direction inputs of sample s's ray.
-  void eval_batch(size_t samples, const int32_t* features, const TmeDirection* const* dirs, TmeOutput* out);
+  // per sample, dirs[s] the direction inputs of sample s's ray (their
+  // direction terms for this MLP are made there when missing, and kept).
+  void eval_batch(size_t samples, const int32_t* features, TmeDirection* const* dirs, TmeOutput* out);
 
   // Direction encoding [d, sin(2^k d), cos(2^k d) for k < L] as signed
   // direction_code_bits codes with direction_code_frac_bits fraction bits.
@@ -174,7 +182,7 @@ class Tme {
 
  private:
   template <fx::Rounding M>
-  void eval_batch_as(size_t samples, const int32_t* features, const TmeDirection* const* dirs, TmeOutput* out);
+  void eval_batch_as(size_t samples, const int32_t* features, TmeDirection* const* dirs, TmeOutput* out);
   // One layer for every sample (kMaxLayerWidth values per sample in x and y).
   // split >= 0: inputs from `split` on are direction inputs, whose part of
   // each sample's sums is dir_terms[sample] (x holds only the first `split`).
@@ -190,12 +198,9 @@ class Tme {
   ChipNumerics n_;
   // Scratch of eval_batch: activations and sums, kMaxLayerWidth per sample.
   std::vector<int32_t> act_a_, act_b_, sum_main_, abs_x_, abs_sum_;
-  std::vector<const TmeDirection*> term_dirs_;  // the batch's distinct directions ...
-  std::vector<TmeDirTerms> terms_;              // ... and their terms
-  std::vector<uint32_t> term_index_;            // per sample: its direction's place in terms_
-  std::vector<const TmeDirTerms*> term_of_sample_;
-  std::vector<const int64_t*> term_rows_;  // per sample: term_of_sample_[s]->term.data()
-  TmeDirection eval_dir_;                  // eval()'s direction inputs
+  std::vector<const TmeDirTerms*> term_of_sample_;  // per sample: its ray's direction terms
+  std::vector<const int64_t*> term_rows_;           // per sample: term_of_sample_[s]->term.data()
+  TmeDirection eval_dir_;                           // eval()'s direction inputs
   std::vector<TmeMlp> mlps_;
   ActivationLut alpha_lut_, sigmoid_lut_;
   fx::Requant dir_code_;  // direction code -> INT8 direction input (step 1 / (2^(activation_bits-1) - 1))

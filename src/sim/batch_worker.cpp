@@ -58,8 +58,8 @@ BatchArithmetic::BatchArithmetic(const SceneModel& model, const ChipConfig& conf
       tme_(model, n, delta, size_t(config.mlp_cache_bytes)),
       vru_(n, config.transmittance_min, config.background) {}
 
-void BatchArithmetic::direction_of(RayState& ray, TmeDirection& out) {
-  if (ray.dir_input.empty()) {
+TmeDirection* BatchArithmetic::direction_of(RayState& ray) {
+  if (ray.dir_input.x.empty()) {
     // The front end leaves the encoding to this thread; the inputs made
     // from the codes are kept with the ray for its next batches.
     const std::vector<int32_t>* code = &ray.dir_code;
@@ -67,13 +67,9 @@ void BatchArithmetic::direction_of(RayState& ray, TmeDirection& out) {
       Tme::encode_direction(ray.world_dir, model_.mlp_arch.dir_frequencies, n_, dir_code_);
       code = &dir_code_;
     }
-    tme_.direction_input(*code, out);
-    ray.dir_input = out.x;
-    ray.dir_input_saturations = out.saturations;
-  } else {
-    out.x.assign(ray.dir_input.begin(), ray.dir_input.end());
-    out.saturations = ray.dir_input_saturations;
+    tme_.direction_input(*code, ray.dir_input);
   }
+  return &ray.dir_input;
 }
 
 void BatchArithmetic::finish(RayPacket& p, Flight& f, size_t first) {
@@ -100,7 +96,7 @@ void BatchArithmetic::flush() {
   for (uint32_t j = 0; j < order_.size(); ++j) order_[j] = j;
   std::stable_sort(order_.begin(), order_.end(),
                    [&](uint32_t a, uint32_t b) { return deferred_[a].mlp < deferred_[b].mlp; });
-  const size_t F = size_t(model_.feature_channels), R = size_t(kRaysPerPacket);
+  const size_t F = size_t(model_.feature_channels);
   for (size_t g0 = 0; g0 < order_.size();) {
     const int32_t mlp = deferred_[order_[g0]].mlp;
     size_t g1 = g0, n = 0;
@@ -111,25 +107,12 @@ void BatchArithmetic::flush() {
       outputs_.resize(n);
       dir_of_sample_.resize(n);
     }
-    // A direction slot per ray of each batch of the group (filled before any
-    // pointer into dirs_ is taken).
-    const size_t slots = (g1 - g0) * R;
-    if (dirs_.size() < slots) {
-      dirs_.resize(slots);
-      dir_batch_.resize(slots, 0);
-    }
-    ++batch_;
     size_t s = 0;
     for (size_t j = g0; j < g1; ++j) {
       const Deferred& d = deferred_[order_[j]];
       const Flight& f = *d.flight;
       for (size_t i = 0; i < f.coords.size(); ++i, ++s) {
-        const size_t slot = (j - g0) * R + f.rays[i];
-        if (dir_batch_[slot] != batch_) {
-          direction_of(d.packet->rays[f.rays[i]], dirs_[slot]);
-          dir_batch_[slot] = batch_;
-        }
-        dir_of_sample_[s] = &dirs_[slot];
+        dir_of_sample_[s] = direction_of(d.packet->rays[f.rays[i]]);
         cfiu_.weighted_sum(f.block, f.coords[i], &features_[s * F]);
       }
     }

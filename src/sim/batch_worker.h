@@ -76,13 +76,10 @@ class BatchArithmetic {
   const chip::Cfiu& cfiu_;
   chip::Tme tme_;
   chip::Vru vru_;
-  std::vector<int32_t> features_;                         // F per sample of the batch
-  std::vector<chip::TmeOutput> outputs_;                  // per sample
-  std::vector<const chip::TmeDirection*> dir_of_sample_;  // per sample: its ray's direction inputs
-  std::vector<chip::TmeDirection> dirs_;                  // per ray of the packet
-  std::vector<int32_t> dir_code_;                         // a ray's direction codes, before its inputs
-  std::vector<uint64_t> dir_batch_;                       // per ray: the batch dirs_ was computed for
-  uint64_t batch_ = 0;
+  std::vector<int32_t> features_;                   // F per sample of the batch
+  std::vector<chip::TmeOutput> outputs_;            // per sample
+  std::vector<chip::TmeDirection*> dir_of_sample_;  // per sample: its ray's direction inputs
+  std::vector<int32_t> dir_code_;                   // a ray's direction codes, before its inputs
   struct Deferred {
     chip::RayPacket* packet;
     Flight* flight;
@@ -91,9 +88,9 @@ class BatchArithmetic {
   std::vector<Deferred> deferred_;  // in submission order
   std::vector<uint32_t> order_;     // flush(): deferred_ grouped by MLP
 
-  // The direction inputs of `ray` into `out` (made once per ray, then kept
-  // with the ray).
-  void direction_of(chip::RayState& ray, chip::TmeDirection& out);
+  // The direction inputs of `ray` (made once per ray, then kept with the
+  // ray, where the TME keeps their terms too).
+  chip::TmeDirection* direction_of(chip::RayState& ray);
   // Composites n samples of f (outputs_ from `first`) and sets f.stay.
   void finish(chip::RayPacket& p, Flight& f, size_t first);
 };

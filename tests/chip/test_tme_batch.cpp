@@ -12,7 +12,7 @@ namespace edrnr::chip {
 namespace {
 
 // density [4 -> 8 -> 3], colour [3 + 3 -> 8 -> 3], no direction frequencies.
-SceneModel saturating_model(uint32_t seed) {
+SceneModel saturating_model(uint32_t seed, int mlps = 1) {
   std::mt19937 rng(seed);
   SceneModel m;
   m.micro_res = 32;
@@ -39,11 +39,13 @@ SceneModel saturating_model(uint32_t seed) {
     d.in_scale = in_scale;
     return d;
   };
-  MlpQ q;
-  q.density = {dense(4, 8, 1 / 32.f), dense(8, 3, 1 / 16.f)};
-  q.color = {dense(6, 8, 1 / 16.f), dense(8, 3, 1 / 8.f)};
-  m.mlps_q8 = {q};
-  m.mlp_coarse_index = {0};
+  for (int i = 0; i < mlps; ++i) {
+    MlpQ q;
+    q.density = {dense(4, 8, 1 / 32.f), dense(8, 3, 1 / 16.f)};
+    q.color = {dense(6, 8, 1 / 16.f), dense(8, 3, 1 / 8.f)};
+    m.mlps_q8.push_back(q);
+    m.mlp_coarse_index.push_back(uint32_t(i));
+  }
   m.finalize();
   return m;
 }
@@ -127,7 +129,7 @@ void check_batch(fx::Rounding rounding, uint32_t seed) {
     codes.push_back(Tme::encode_direction(dirs[r], 0, n));
     tme.direction_input(codes.back(), inputs[r]);
   }
-  std::vector<const TmeDirection*> of_sample(samples);
+  std::vector<TmeDirection*> of_sample(samples);
   for (size_t s = 0; s < samples; ++s) of_sample[s] = &inputs[s % dirs.size()];
   std::vector<TmeOutput> out(samples);
   tme.eval_batch(samples, features.data(), of_sample.data(), out.data());
@@ -154,6 +156,56 @@ void check_batch(fx::Rounding rounding, uint32_t seed) {
   }
   EXPECT_EQ(single.counters().saturations, tme.counters().saturations);
   EXPECT_EQ(single.counters().macs, tme.counters().macs);
+}
+
+// A ray's direction terms are kept in its TmeDirection between batches: they
+// must be made again for another MLP, and for another TME's MLP of the same
+// index (another model), and reused when the MLP comes back.
+TEST(TmeBatch, KeptDirectionTermsFollowTheMlpAndTheTme) {
+  const SceneModel model = saturating_model(11, 2), other_model = saturating_model(12, 1);
+  ChipNumerics n;
+  n.rounding = fx::Rounding::HalfUp;
+  Tme tme(model, n, 0.1, 8448), other(other_model, n, 0.1, 8448);
+  ASSERT_EQ(tme.mlp_count(), 2u);
+  std::mt19937 rng(13);
+  const int F = model.feature_channels;
+  const size_t samples = 20;
+  std::vector<int32_t> features(samples * size_t(F));
+  for (int32_t& f : features) f = int32_t(int(rng() % 65536) - 32768) >> int(rng() % 8);
+  const std::vector<Vec3d> dirs = {{0.6, -0.8, 0}, {-0.48, 0.6, 0.64}, {0.1, 0.2, -0.97}};
+  std::vector<std::vector<int32_t>> codes;
+  std::vector<TmeDirection> inputs(dirs.size());
+  for (size_t r = 0; r < dirs.size(); ++r) {
+    codes.push_back(Tme::encode_direction(dirs[r], 0, n));
+    tme.direction_input(codes.back(), inputs[r]);
+  }
+  std::vector<TmeDirection*> of_sample(samples);
+  for (size_t s = 0; s < samples; ++s) of_sample[s] = &inputs[s % dirs.size()];
+  std::vector<TmeOutput> out(samples);
+  auto expect_reference = [&](const Tme& t, int mlp, const char* what) {
+    RefCounters ref;
+    for (size_t s = 0; s < samples; ++s) {
+      const TmeOutput e =
+          reference_eval(t, t.mlp(size_t(mlp)), n, &features[s * size_t(F)], codes[s % dirs.size()], F, ref);
+      ASSERT_EQ(out[s].raw_density, e.raw_density) << what << " sample " << s;
+      ASSERT_EQ(out[s].rgb, e.rgb) << what << " sample " << s;
+    }
+  };
+  bool rgb_differs = false;
+  std::vector<TmeOutput> first;
+  for (int mlp : {0, 1, 0}) {
+    tme.select(mlp);
+    tme.eval_batch(samples, features.data(), of_sample.data(), out.data());
+    expect_reference(tme, mlp, mlp == 0 ? "MLP 0" : "MLP 1");
+    if (first.empty())
+      first = out;
+    else
+      for (size_t s = 0; s < samples; ++s) rgb_differs |= out[s].rgb != first[s].rgb;
+  }
+  EXPECT_TRUE(rgb_differs);  // the two MLPs disagree somewhere: a stale term would show
+  other.select(0);
+  other.eval_batch(samples, features.data(), of_sample.data(), out.data());
+  expect_reference(other, 0, "another TME");
 }
 
 TEST(TmeBatch, MatchesThePerSampleFormulasInEveryRoundingMode) {
