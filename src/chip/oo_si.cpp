@@ -1,6 +1,7 @@
 #include "chip/oo_si.h"
 
 #include <algorithm>
+#include <bit>
 #include <stdexcept>
 
 #include "core/error.h"
@@ -46,17 +47,53 @@ LsEntry OooSi::take(int position) {
   return e;
 }
 
-SampleCoord sample_coordinate(const RayMath& math, const ChipRay& ray, int64_t k, int frac_bits,
-                              fx::Rounding rounding) {
+namespace {
+// fx::to_fixed_unsigned(f, frac_bits, frac_bits + 1, M) for f in [0, 1] and
+// frac_bits in [0, 52] (scale = 2^frac_bits): f 2^frac_bits is exact and at
+// most 2^frac_bits, which frac_bits + 1 bits hold, so nothing saturates.
+template <fx::Rounding M>
+int64_t unit_fraction_to_fixed(double f, double scale) {
+  const double s = f * scale;
+  const int64_t q = int64_t(s);  // s >= 0: truncation is the floor
+  const double frac = s - double(q);
+  if constexpr (M == fx::Rounding::HalfUp) return q + (frac >= 0.5 ? 1 : 0);
+  if constexpr (M == fx::Rounding::HalfEven) return q + ((frac > 0.5 || (frac == 0.5 && (q & 1) != 0)) ? 1 : 0);
+  return q;
+}
+
+// The coordinate with each axis's fraction f in [0, 1] brought to fixed point by to_fixed(f).
+template <class ToFixed>
+SampleCoord coordinate_with(const RayMath& math, const ChipRay& ray, int64_t k, ToFixed to_fixed) {
   const Vec3d p = math.point(ray, k);
   SampleCoord s;
   s.micro = math.micro_voxel(p);
   for (int a = 0; a < 3; ++a) {
     s.local[a] = s.micro[a] % kMicroPerFine;
     const double f = std::clamp(p[a] - double(s.micro[a]), 0.0, 1.0);  // exact: p has few significant bits
-    s.frac[size_t(a)] = fx::to_fixed_unsigned(f, frac_bits, frac_bits + 1, rounding);
+    s.frac[size_t(a)] = to_fixed(f);
   }
   return s;
+}
+}  // namespace
+
+SampleCoord sample_coordinate(const RayMath& math, const ChipRay& ray, int64_t k, int frac_bits,
+                              fx::Rounding rounding) {
+  if (frac_bits >= 0 && frac_bits <= 52) {
+    const double scale = std::bit_cast<double>(uint64_t(1023 + frac_bits) << 52);  // 2^frac_bits
+    switch (rounding) {
+      case fx::Rounding::Floor:
+        return coordinate_with(math, ray, k,
+                               [scale](double f) { return unit_fraction_to_fixed<fx::Rounding::Floor>(f, scale); });
+      case fx::Rounding::HalfUp:
+        return coordinate_with(math, ray, k,
+                               [scale](double f) { return unit_fraction_to_fixed<fx::Rounding::HalfUp>(f, scale); });
+      case fx::Rounding::HalfEven:
+        return coordinate_with(math, ray, k,
+                               [scale](double f) { return unit_fraction_to_fixed<fx::Rounding::HalfEven>(f, scale); });
+    }
+  }
+  return coordinate_with(math, ray, k,
+                         [&](double f) { return fx::to_fixed_unsigned(f, frac_bits, frac_bits + 1, rounding); });
 }
 
 }  // namespace edrnr::chip

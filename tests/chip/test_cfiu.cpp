@@ -186,5 +186,18 @@ TEST(OooSi, SampleCoordinateByHand) {
   EXPECT_EQ(s.frac[0], 256);
 }
 
+TEST(OooSi, SampleCoordinateRoundsTiesAsEachModeSays) {
+  const RayMath math(ChipNumerics{}.traversal_float, 1.0, 32);
+  // Fractions 0.25, 0.75 and 0.5 at one fraction bit: 0.5, 1.5 (ties) and 1.
+  const ChipRay r{{10.25, 3.75, 7.5}, {0, 0, 0}};
+  using A = std::array<int64_t, 3>;
+  EXPECT_EQ(sample_coordinate(math, r, 0, 1, fx::Rounding::Floor).frac, (A{0, 1, 1}));
+  EXPECT_EQ(sample_coordinate(math, r, 0, 1, fx::Rounding::HalfUp).frac, (A{1, 2, 1}));
+  EXPECT_EQ(sample_coordinate(math, r, 0, 1, fx::Rounding::HalfEven).frac, (A{0, 2, 1}));
+  // Wider than a double's significand: the general conversion, exact here.
+  const int64_t q = int64_t(1) << 58;  // 0.25 at 60 fraction bits
+  EXPECT_EQ(sample_coordinate(math, r, 0, 60, fx::Rounding::HalfEven).frac, (A{q, 3 * q, 2 * q}));
+}
+
 }  // namespace
 }  // namespace edrnr::chip
