@@ -235,6 +235,16 @@ namespace {
 template <fx::Rounding M>
 uint64_t requantize_codes(const int32_t* code, size_t n, const fx::Requant& q, int bits, int32_t* out) {
   uint64_t saturations = 0;
+  if (fx::requantize_fits_64<M>(q)) {  // the codes fit 32 bits: the 64-bit path, decided once
+    const int64_t lo = fx::min_signed(bits), hi = fx::max_signed(bits);
+    for (size_t i = 0; i < n; ++i) {
+      const int64_t r = fx::requantize_64<M>(code[i], q);
+      const int64_t v = r < lo ? lo : (r > hi ? hi : r);
+      saturations += v != r;
+      out[i] = int32_t(v);
+    }
+    return saturations;
+  }
   for (size_t i = 0; i < n; ++i) {
     const int64_t r = fx::requantize<M>(code[i], q);
     const int64_t v = fx::saturate(r, bits);
