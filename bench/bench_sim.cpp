@@ -13,8 +13,9 @@
 //   bench_sim --benchmark_filter='BM_Simulate/frame:[0-3]/threads:1|BM_Simulate/frame:0/threads:2|BM_Reference'
 //   bench_sim --benchmark_filter=MemorySystem
 // Last figures (wall s, noisy host; docs/simulator.md "Host speed"): on an
-// AVX2-only AMD EPYC, lego one thread 1.52-1.61 against the reference
-// renderer's 1.46-1.51 when the two alternate (median ratio 1.04); on an
+// AVX2-only AMD EPYC, lego one thread median 1.56 (least 1.49) against the
+// reference renderer's median 1.55, median ratio 1.02 over ten rounds (1.04
+// the round before); on an
 // AVX-512 machine before that, lego one thread least 1.20, median 1.32,
 // against 1.13 and 1.20 (median ratio 1.09), two threads about 0.89-0.93
 // when the host leaves both cores; mic one thread about 1.0x the reference.
