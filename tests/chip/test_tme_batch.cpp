@@ -109,6 +109,32 @@ TmeOutput reference_eval(const Tme& tme, const TmeMlp& m, const ChipNumerics& n,
   return out;
 }
 
+// Random interpolated features over the whole INT16 range (many clip at the
+// input), F per sample.
+std::vector<int32_t> random_features(std::mt19937& rng, size_t samples, int F) {
+  std::vector<int32_t> features(samples * size_t(F));
+  for (int32_t& f : features) f = int32_t(int(rng() % 65536) - 32768) >> int(rng() % 8);
+  return features;
+}
+
+// Rays of the given directions (no frequencies) with their TME inputs, and
+// sample s on ray s % dirs.size().
+struct BatchRays {
+  std::vector<std::vector<int32_t>> codes;
+  std::vector<TmeDirection> inputs;
+  std::vector<TmeDirection*> of_sample;
+};
+BatchRays batch_rays(const Tme& tme, const ChipNumerics& n, const std::vector<Vec3d>& dirs, size_t samples) {
+  BatchRays b;
+  b.inputs.resize(dirs.size());
+  for (size_t r = 0; r < dirs.size(); ++r) {
+    b.codes.push_back(Tme::encode_direction(dirs[r], 0, n));
+    tme.direction_input(b.codes.back(), b.inputs[r]);
+  }
+  for (size_t s = 0; s < samples; ++s) b.of_sample.push_back(&b.inputs[s % dirs.size()]);
+  return b;
+}
+
 void check_batch(fx::Rounding rounding, uint32_t seed) {
   const SceneModel model = saturating_model(seed);
   ChipNumerics n;
@@ -118,21 +144,13 @@ void check_batch(fx::Rounding rounding, uint32_t seed) {
   std::mt19937 rng(seed + 1);
   const int F = model.feature_channels;
   const size_t samples = 53;
-  // Interpolated features over the whole INT16 range (many clip at the input).
-  std::vector<int32_t> features(samples * size_t(F));
-  for (int32_t& f : features) f = int32_t(int(rng() % 65536) - 32768) >> int(rng() % 8);
+  const std::vector<int32_t> features = random_features(rng, samples, F);
   // Five rays, one of them along an axis (codes of +-1 clip to the INT8 step).
   const std::vector<Vec3d> dirs = {{1, 0, 0}, {0.6, -0.8, 0}, {-0.48, 0.6, 0.64}, {0, 0, -1}, {0.1, 0.2, -0.97}};
-  std::vector<std::vector<int32_t>> codes;
-  std::vector<TmeDirection> inputs(dirs.size());
-  for (size_t r = 0; r < dirs.size(); ++r) {
-    codes.push_back(Tme::encode_direction(dirs[r], 0, n));
-    tme.direction_input(codes.back(), inputs[r]);
-  }
-  std::vector<TmeDirection*> of_sample(samples);
-  for (size_t s = 0; s < samples; ++s) of_sample[s] = &inputs[s % dirs.size()];
+  BatchRays rays = batch_rays(tme, n, dirs, samples);
+  const std::vector<std::vector<int32_t>>& codes = rays.codes;
   std::vector<TmeOutput> out(samples);
-  tme.eval_batch(samples, features.data(), of_sample.data(), out.data());
+  tme.eval_batch(samples, features.data(), rays.of_sample.data(), out.data());
 
   RefCounters ref;
   for (size_t s = 0; s < samples; ++s) {
@@ -170,17 +188,11 @@ TEST(TmeBatch, KeptDirectionTermsFollowTheMlpAndTheTme) {
   std::mt19937 rng(13);
   const int F = model.feature_channels;
   const size_t samples = 20;
-  std::vector<int32_t> features(samples * size_t(F));
-  for (int32_t& f : features) f = int32_t(int(rng() % 65536) - 32768) >> int(rng() % 8);
+  const std::vector<int32_t> features = random_features(rng, samples, F);
   const std::vector<Vec3d> dirs = {{0.6, -0.8, 0}, {-0.48, 0.6, 0.64}, {0.1, 0.2, -0.97}};
-  std::vector<std::vector<int32_t>> codes;
-  std::vector<TmeDirection> inputs(dirs.size());
-  for (size_t r = 0; r < dirs.size(); ++r) {
-    codes.push_back(Tme::encode_direction(dirs[r], 0, n));
-    tme.direction_input(codes.back(), inputs[r]);
-  }
-  std::vector<TmeDirection*> of_sample(samples);
-  for (size_t s = 0; s < samples; ++s) of_sample[s] = &inputs[s % dirs.size()];
+  BatchRays rays = batch_rays(tme, n, dirs, samples);
+  const std::vector<std::vector<int32_t>>& codes = rays.codes;
+  std::vector<TmeDirection*>& of_sample = rays.of_sample;
   std::vector<TmeOutput> out(samples);
   auto expect_reference = [&](const Tme& t, int mlp, const char* what) {
     RefCounters ref;
