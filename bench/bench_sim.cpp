@@ -12,6 +12,7 @@
 //   bench_sim --benchmark_filter='BM_Simulate/frame:0/|BM_Reference/frame:0'   # lego
 //   bench_sim --benchmark_filter='BM_Simulate/frame:[0-3]/threads:1|BM_Simulate/frame:0/threads:2|BM_Reference'
 //   bench_sim --benchmark_filter=MemorySystem
+//   bench_sim --benchmark_filter='BM_SimulateVsReference/frame:0'   # nine lego pairs, median ratio
 // Last figures (wall s, noisy host; docs/simulator.md "Host speed"): on an
 // AVX2-only AMD EPYC, lego one thread median 1.56 (least 1.49) against the
 // reference renderer's median 1.55, median ratio 1.02 over ten rounds (1.04
@@ -22,10 +23,13 @@
 // A frame whose model or dataset is missing is skipped with a message.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
+#include <chrono>
 #include <filesystem>
 #include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "data/dataset.h"
 #include "model/model_io.h"
@@ -126,6 +130,51 @@ void BM_Reference(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(render_reference(*w.model, w.camera, s));
 }
 BENCHMARK(BM_Reference)->ArgNames({"frame"})->DenseRange(0, 2)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
+
+// The simulator against the reference renderer, both on one thread, as
+// pairs run back to back in one process: each iteration times one
+// simulate_chip and then one render_reference of the frame, and the
+// counters give the median, least and greatest ratio of the pairs (a noisy
+// host moves single runs by tens of percent; the pairs' median much less).
+void BM_SimulateVsReference(benchmark::State& state) {
+  const Workload& w = workload(state.range(0));
+  if (!w.missing.empty()) {
+    state.SkipWithError(w.missing.c_str());
+    return;
+  }
+  state.SetLabel(kFrameNames[state.range(0)]);
+  sim::SimOptions opt;
+  RenderSettings s;
+  s.threads = 1;
+  std::vector<double> ratios, sim_s, ref_s;
+  using Clock = std::chrono::steady_clock;
+  for (auto _ : state) {
+    const Clock::time_point t0 = Clock::now();
+    benchmark::DoNotOptimize(sim::simulate_chip(*w.model, w.camera, preset(), opt));
+    const Clock::time_point t1 = Clock::now();
+    benchmark::DoNotOptimize(render_reference(*w.model, w.camera, s));
+    const Clock::time_point t2 = Clock::now();
+    sim_s.push_back(std::chrono::duration<double>(t1 - t0).count());
+    ref_s.push_back(std::chrono::duration<double>(t2 - t1).count());
+    ratios.push_back(sim_s.back() / ref_s.back());
+  }
+  auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    const size_t n = v.size();
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+  };
+  state.counters["ratio_median"] = median(ratios);
+  state.counters["ratio_min"] = *std::min_element(ratios.begin(), ratios.end());
+  state.counters["ratio_max"] = *std::max_element(ratios.begin(), ratios.end());
+  state.counters["sim_s_median"] = median(sim_s);
+  state.counters["reference_s_median"] = median(ref_s);
+}
+BENCHMARK(BM_SimulateVsReference)
+    ->ArgNames({"frame"})
+    ->DenseRange(0, 1)
+    ->Iterations(9)
+    ->Unit(benchmark::kSecond)
+    ->UseRealTime();
 
 // The DRAM model behind the clock crossing, per core cycle: idle, and with a
 // 1000-byte feature block read started every 200 core cycles.
