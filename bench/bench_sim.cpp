@@ -88,15 +88,24 @@ const Workload& workload(int64_t frame) {
 
 const char* kFrameNames[] = {"lego", "mic", "proc800", "proc200"};
 
-// args: frame, threads. Counters: simulated cycles per host second, cycles and
-// samples of the frame.
-void BM_Simulate(benchmark::State& state) {
+// The workload of the benchmark's frame argument, labelled; null (the run
+// skipped with the reason) when its model or dataset is missing.
+const Workload* frame_of(benchmark::State& state) {
   const Workload& w = workload(state.range(0));
   if (!w.missing.empty()) {
     state.SkipWithError(w.missing.c_str());
-    return;
+    return nullptr;
   }
   state.SetLabel(kFrameNames[state.range(0)]);
+  return &w;
+}
+
+// args: frame, threads. Counters: simulated cycles per host second, cycles and
+// samples of the frame.
+void BM_Simulate(benchmark::State& state) {
+  const Workload* wp = frame_of(state);
+  if (!wp) return;
+  const Workload& w = *wp;
   sim::SimOptions opt;
   opt.threads = int(state.range(1));
   uint64_t cycles = 0, samples = 0;
@@ -119,12 +128,9 @@ BENCHMARK(BM_Simulate)
 
 // The reference renderer on one thread, same frames (args: frame).
 void BM_Reference(benchmark::State& state) {
-  const Workload& w = workload(state.range(0));
-  if (!w.missing.empty()) {
-    state.SkipWithError(w.missing.c_str());
-    return;
-  }
-  state.SetLabel(kFrameNames[state.range(0)]);
+  const Workload* wp = frame_of(state);
+  if (!wp) return;
+  const Workload& w = *wp;
   RenderSettings s;
   s.threads = 1;
   for (auto _ : state) benchmark::DoNotOptimize(render_reference(*w.model, w.camera, s));
@@ -137,12 +143,9 @@ BENCHMARK(BM_Reference)->ArgNames({"frame"})->DenseRange(0, 2)->Iterations(1)->U
 // counters give the median, least and greatest ratio of the pairs (a noisy
 // host moves single runs by tens of percent; the pairs' median much less).
 void BM_SimulateVsReference(benchmark::State& state) {
-  const Workload& w = workload(state.range(0));
-  if (!w.missing.empty()) {
-    state.SkipWithError(w.missing.c_str());
-    return;
-  }
-  state.SetLabel(kFrameNames[state.range(0)]);
+  const Workload* wp = frame_of(state);
+  if (!wp) return;
+  const Workload& w = *wp;
   sim::SimOptions opt;
   RenderSettings s;
   s.threads = 1;
