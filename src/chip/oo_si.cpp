@@ -48,19 +48,6 @@ LsEntry OooSi::take(int position) {
 }
 
 namespace {
-// fx::to_fixed_unsigned(f, frac_bits, frac_bits + 1, M) for f in [0, 1] and
-// frac_bits in [0, 52] (scale = 2^frac_bits): f 2^frac_bits is exact and at
-// most 2^frac_bits, which frac_bits + 1 bits hold, so nothing saturates.
-template <fx::Rounding M>
-int64_t unit_fraction_to_fixed(double f, double scale) {
-  const double s = f * scale;
-  const int64_t q = int64_t(s);  // s >= 0: truncation is the floor
-  const double frac = s - double(q);
-  if constexpr (M == fx::Rounding::HalfUp) return q + (frac >= 0.5 ? 1 : 0);
-  if constexpr (M == fx::Rounding::HalfEven) return q + ((frac > 0.5 || (frac == 0.5 && (q & 1) != 0)) ? 1 : 0);
-  return q;
-}
-
 // The coordinate with each axis's fraction f in [0, 1] brought to fixed point by to_fixed(f).
 template <class ToFixed>
 SampleCoord coordinate_with(const RayMath& math, const ChipRay& ray, int64_t k, ToFixed to_fixed) {
@@ -78,18 +65,20 @@ SampleCoord coordinate_with(const RayMath& math, const ChipRay& ray, int64_t k, 
 
 SampleCoord sample_coordinate(const RayMath& math, const ChipRay& ray, int64_t k, int frac_bits,
                               fx::Rounding rounding) {
-  if (frac_bits >= 0 && frac_bits <= 52) {
+  // The fraction f is in [0, 1]: f 2^frac_bits is exact and at most
+  // 2^frac_bits, which frac_bits + 1 bits hold (nothing saturates).
+  if (frac_bits >= 0 && frac_bits <= 51) {
     const double scale = std::bit_cast<double>(uint64_t(1023 + frac_bits) << 52);  // 2^frac_bits
     switch (rounding) {
       case fx::Rounding::Floor:
         return coordinate_with(math, ray, k,
-                               [scale](double f) { return unit_fraction_to_fixed<fx::Rounding::Floor>(f, scale); });
+                               [scale](double f) { return fx::round_scaled_small<fx::Rounding::Floor>(f, scale); });
       case fx::Rounding::HalfUp:
         return coordinate_with(math, ray, k,
-                               [scale](double f) { return unit_fraction_to_fixed<fx::Rounding::HalfUp>(f, scale); });
+                               [scale](double f) { return fx::round_scaled_small<fx::Rounding::HalfUp>(f, scale); });
       case fx::Rounding::HalfEven:
         return coordinate_with(math, ray, k,
-                               [scale](double f) { return unit_fraction_to_fixed<fx::Rounding::HalfEven>(f, scale); });
+                               [scale](double f) { return fx::round_scaled_small<fx::Rounding::HalfEven>(f, scale); });
     }
   }
   return coordinate_with(math, ray, k,

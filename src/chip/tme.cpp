@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -168,12 +169,19 @@ std::vector<int32_t> Tme::encode_direction(const Vec3d& dir, int frequencies, co
   return out;
 }
 
-void Tme::encode_direction(const Vec3d& dir, int frequencies, const ChipNumerics& n, std::vector<int32_t>& out) {
-  out.resize(3 + 6 * size_t(std::max(frequencies, 0)));
-  int32_t* code = out.data();
+namespace {
+// Tme::encode_direction with the rounding mode fixed at compile time.
+template <fx::Rounding M>
+void encode_direction_as(const Vec3d& dir, int frequencies, const ChipNumerics& n, int32_t* code) {
   const int frac_bits = n.direction_code_frac_bits, bits = n.direction_code_bits;
-  const fx::Rounding mode = n.rounding;
-  auto put = [&](double v) { *code++ = int32_t(fx::to_fixed(v, frac_bits, bits, mode)); };
+  // Values in [-1, 1] (the direction, sines and cosines) with at most 51
+  // fraction bits scale exactly below 2^52: no range checks needed.
+  const bool small = frac_bits >= 0 && frac_bits <= 51;
+  const double unit = small ? std::bit_cast<double>(uint64_t(1023 + frac_bits) << 52) : 0.0;  // 2^frac_bits
+  auto put = [&](double v) {
+    *code++ = int32_t(small && std::fabs(v) <= 1.0 ? fx::saturate(fx::round_scaled_small<M>(v, unit), bits)
+                                                   : fx::to_fixed(v, frac_bits, bits, M));
+  };
   for (int a = 0; a < 3; ++a) put(dir[a]);
   // The sines and cosines of every frequency at once (det_sin_cos: the bits of
   // det_sin / det_cos), on the stack for up to 16 frequencies.
@@ -195,6 +203,19 @@ void Tme::encode_direction(const Vec3d& dir, int frequencies, const ChipNumerics
   for (int k = 0; k < frequencies; ++k) {
     for (int a = 0; a < 3; ++a) put(sin_v[size_t(3 * k + a)]);
     for (int a = 0; a < 3; ++a) put(cos_v[size_t(3 * k + a)]);
+  }
+}
+}  // namespace
+
+void Tme::encode_direction(const Vec3d& dir, int frequencies, const ChipNumerics& n, std::vector<int32_t>& out) {
+  out.resize(3 + 6 * size_t(std::max(frequencies, 0)));
+  switch (n.rounding) {
+    case fx::Rounding::Floor:
+      return encode_direction_as<fx::Rounding::Floor>(dir, frequencies, n, out.data());
+    case fx::Rounding::HalfUp:
+      return encode_direction_as<fx::Rounding::HalfUp>(dir, frequencies, n, out.data());
+    case fx::Rounding::HalfEven:
+      return encode_direction_as<fx::Rounding::HalfEven>(dir, frequencies, n, out.data());
   }
 }
 

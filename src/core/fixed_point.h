@@ -255,6 +255,20 @@ inline int64_t to_fixed_unsigned(double v, int frac_bits, int bits, Rounding mod
   return saturate_unsigned(detail::round_scaled(v, frac_bits, mode), bits);
 }
 
+// round(v * scale) with the rounding fixed at compile time, for inner loops:
+// scale = 2^frac_bits and |v * scale| < 2^52, so the product is exact and
+// round_scaled's range checks are not needed (the same result).
+template <Rounding M>
+inline int64_t round_scaled_small(double v, double scale) {
+  const double s = v * scale;
+  int64_t q = int64_t(s);  // truncation toward zero
+  if (double(q) > s) --q;  // the floor
+  const double frac = s - double(q);
+  if constexpr (M == Rounding::HalfUp) return q + (frac >= 0.5 ? 1 : 0);
+  if constexpr (M == Rounding::HalfEven) return q + ((frac > 0.5 || (frac == 0.5 && (q & 1) != 0)) ? 1 : 0);
+  return q;
+}
+
 // The value q * 2^-frac_bits. Exact when |q| < 2^53 (otherwise the nearest
 // double, ties to even).
 // Scaling by 2^-frac_bits, a normal double for |frac_bits| <= 960, is exact

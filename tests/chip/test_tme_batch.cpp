@@ -6,6 +6,7 @@
 #include <cmath>
 #include <random>
 
+#include "chip/activation_lut.h"
 #include "chip/tme.h"
 
 namespace edrnr::chip {
@@ -218,6 +219,42 @@ TEST(TmeBatch, KeptDirectionTermsFollowTheMlpAndTheTme) {
   other.select(0);
   other.eval_batch(samples, features.data(), of_sample.data(), out.data());
   expect_reference(other, 0, "another TME");
+}
+
+// The direction codes are the values (the direction, det_sin_cos's sines
+// and cosines of 2^k times it) as fx::to_fixed rounds them, in every mode,
+// ties included (0.5 + 2^-15 is 8192.5 steps of 2^-14).
+TEST(TmeBatch, DirectionCodesAreTheValuesRoundedByToFixed) {
+  const std::vector<Vec3d> dirs = {
+      {0.5 + 0x1p-15, -0.5 - 0x1p-15, 0.7}, {1, 0, 0}, {-0.48, 0.6, 0.64}, {0.1, 0.2, -0.97}, {-1, 0, 0}};
+  for (fx::Rounding mode : {fx::Rounding::Floor, fx::Rounding::HalfUp, fx::Rounding::HalfEven}) {
+    ChipNumerics n;
+    n.rounding = mode;
+    const int L = 3;
+    for (const Vec3d& d : dirs) {
+      const std::vector<int32_t> code = Tme::encode_direction(d, L, n);
+      ASSERT_EQ(code.size(), size_t(3 + 6 * L));
+      std::vector<double> arg;
+      for (int k = 0; k < L; ++k)
+        for (int a = 0; a < 3; ++a) arg.push_back(std::ldexp(d[a], k));
+      std::vector<double> sn(arg.size()), cs(arg.size());
+      det_sin_cos(arg.data(), arg.size(), sn.data(), cs.data());
+      std::vector<double> values = {d.x, d.y, d.z};
+      for (int k = 0; k < L; ++k) {
+        for (int a = 0; a < 3; ++a) values.push_back(sn[size_t(3 * k + a)]);
+        for (int a = 0; a < 3; ++a) values.push_back(cs[size_t(3 * k + a)]);
+      }
+      for (size_t i = 0; i < values.size(); ++i)
+        EXPECT_EQ(code[i], fx::to_fixed(values[i], n.direction_code_frac_bits, n.direction_code_bits, mode))
+            << "mode " << int(mode) << " value " << i;
+    }
+  }
+  ChipNumerics floor, half_up;
+  floor.rounding = fx::Rounding::Floor;
+  half_up.rounding = fx::Rounding::HalfUp;
+  const Vec3d tie{0.5 + 0x1p-15, -0.5 - 0x1p-15, 0};
+  EXPECT_EQ(Tme::encode_direction(tie, 0, floor), (std::vector<int32_t>{8192, -8193, 0}));
+  EXPECT_EQ(Tme::encode_direction(tie, 0, half_up), (std::vector<int32_t>{8193, -8192, 0}));
 }
 
 TEST(TmeBatch, MatchesThePerSampleFormulasInEveryRoundingMode) {
