@@ -1,7 +1,6 @@
 #include "chip/oo_si.h"
 
 #include <algorithm>
-#include <bit>
 #include <stdexcept>
 
 #include "core/error.h"
@@ -67,8 +66,8 @@ SampleCoord sample_coordinate(const RayMath& math, const ChipRay& ray, int64_t k
                               fx::Rounding rounding) {
   // The fraction f is in [0, 1]: f 2^frac_bits is exact and at most
   // 2^frac_bits, which frac_bits + 1 bits hold (nothing saturates).
-  if (frac_bits >= 0 && frac_bits <= 51) {
-    const double scale = std::bit_cast<double>(uint64_t(1023 + frac_bits) << 52);  // 2^frac_bits
+  if (frac_bits >= 0 && frac_bits <= fx::kSmallScaleFracBitsMax) {
+    const double scale = fx::pow2(frac_bits);
     switch (rounding) {
       case fx::Rounding::Floor:
         return coordinate_with(math, ray, k,

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <array>
-#include <bit>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -176,8 +175,8 @@ void encode_direction_as(const Vec3d& dir, int frequencies, const ChipNumerics& 
   const int frac_bits = n.direction_code_frac_bits, bits = n.direction_code_bits;
   // Values in [-1, 1] (the direction, sines and cosines) with at most 51
   // fraction bits scale exactly below 2^52: no range checks needed.
-  const bool small = frac_bits >= 0 && frac_bits <= 51;
-  const double unit = small ? std::bit_cast<double>(uint64_t(1023 + frac_bits) << 52) : 0.0;  // 2^frac_bits
+  const bool small = frac_bits >= 0 && frac_bits <= fx::kSmallScaleFracBitsMax;
+  const double unit = small ? fx::pow2(frac_bits) : 0.0;
   auto put = [&](double v) {
     *code++ = int32_t(small && std::fabs(v) <= 1.0 ? fx::saturate(fx::round_scaled_small<M>(v, unit), bits)
                                                    : fx::to_fixed(v, frac_bits, bits, M));
@@ -252,30 +251,6 @@ void Tme::select(int32_t index) {
   current_ = index;
 }
 
-namespace {
-template <fx::Rounding M>
-uint64_t requantize_codes(const int32_t* code, size_t n, const fx::Requant& q, int bits, int32_t* out) {
-  uint64_t saturations = 0;
-  if (fx::requantize_fits_64<M>(q)) {  // the codes fit 32 bits: the 64-bit path, decided once
-    const int64_t lo = fx::min_signed(bits), hi = fx::max_signed(bits);
-    for (size_t i = 0; i < n; ++i) {
-      const int64_t r = fx::requantize_64<M>(code[i], q);
-      const int64_t v = r < lo ? lo : (r > hi ? hi : r);
-      saturations += v != r;
-      out[i] = int32_t(v);
-    }
-    return saturations;
-  }
-  for (size_t i = 0; i < n; ++i) {
-    const int64_t r = fx::requantize<M>(code[i], q);
-    const int64_t v = fx::saturate(r, bits);
-    saturations += v != r;
-    out[i] = int32_t(v);
-  }
-  return saturations;
-}
-}  // namespace
-
 void Tme::direction_input(const std::vector<int32_t>& dir_code, TmeDirection& out) const {
   out.terms_tme = nullptr;  // the terms were those of other inputs
   out.terms_mlp = -1;
@@ -285,13 +260,13 @@ void Tme::direction_input(const std::vector<int32_t>& dir_code, TmeDirection& ou
   const int bits = n_.activation_bits;
   switch (n_.rounding) {
     case fx::Rounding::Floor:
-      out.saturations = requantize_codes<fx::Rounding::Floor>(c, n, dir_code_, bits, out.x.data());
+      out.saturations = fx::requantize_saturate_row<fx::Rounding::Floor>(c, n, dir_code_, bits, out.x.data());
       return;
     case fx::Rounding::HalfUp:
-      out.saturations = requantize_codes<fx::Rounding::HalfUp>(c, n, dir_code_, bits, out.x.data());
+      out.saturations = fx::requantize_saturate_row<fx::Rounding::HalfUp>(c, n, dir_code_, bits, out.x.data());
       return;
     case fx::Rounding::HalfEven:
-      out.saturations = requantize_codes<fx::Rounding::HalfEven>(c, n, dir_code_, bits, out.x.data());
+      out.saturations = fx::requantize_saturate_row<fx::Rounding::HalfEven>(c, n, dir_code_, bits, out.x.data());
       return;
   }
 }

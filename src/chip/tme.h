@@ -133,12 +133,14 @@ struct TmeDirTerms {
 // direction terms of the MLP that last evaluated it (Tme::eval_batch), so a
 // ray whose samples in one coarse voxel come in several batches has them
 // made once; direction_input() drops them.
+class Tme;
+
 struct TmeDirection {
   std::vector<int32_t> x;    // dir_dims activation codes
   uint64_t saturations = 0;  // codes clipped on the way (counted again per sample)
   // The terms and whose they are: the Tme and the index of its MLP.
   TmeDirTerms terms;
-  const void* terms_tme = nullptr;
+  const Tme* terms_tme = nullptr;
   int32_t terms_mlp = -1;
 };
 

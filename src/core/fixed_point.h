@@ -164,6 +164,23 @@ constexpr int64_t requantize(int64_t x, Requant q) {
   return multiply_shift(x, q.multiplier, q.shift, M);
 }
 
+// out[j] = saturate(requantize<M>(x[j], q), bits) for j < n; returns how
+// many values the saturation changed. The inputs fit 32 bits, so the 64-bit
+// path's conditions are the multiplier's, checked once per row.
+template <Rounding M>
+uint64_t requantize_saturate_row(const int32_t* x, size_t n, Requant q, int bits, int32_t* out) {
+  const int64_t lo = min_signed(bits), hi = max_signed(bits);
+  const bool fits_64 = requantize_fits_64<M>(q);
+  uint64_t saturations = 0;
+  for (size_t j = 0; j < n; ++j) {
+    const int64_t r = fits_64 ? requantize_64<M>(x[j], q) : requantize<M>(x[j], q);
+    const int64_t v = r < lo ? lo : (r > hi ? hi : r);
+    saturations += v != r;
+    out[j] = int32_t(v);
+  }
+  return saturations;
+}
+
 // out[j] = requantize<M>(saturate(x[j], bits), q) for j < n; returns how
 // many x[j] the saturation changed. The saturated values fit 32 bits, so
 // the 64-bit path's conditions are the multiplier's, checked once per row.
@@ -205,6 +222,11 @@ uint64_t saturate_requantize_row(const int32_t* x, size_t n, int bits, Requant q
 // multiplier_bits is out of range.
 Requant requant_from_scale(double scale, int multiplier_bits);
 
+// 2^e as a double, exactly, for -1022 <= e <= 1023 (a normal double).
+constexpr double pow2(int e) { return std::bit_cast<double>(uint64_t(1023 + e) << 52); }
+// |v| <= 1 scaled by 2^frac_bits stays below 2^52 (round_scaled_small) up to this.
+inline constexpr int kSmallScaleFracBitsMax = 51;
+
 namespace detail {
 // round(v * 2^frac_bits) as an int64_t (saturated), before the N-bit clamp.
 inline int64_t round_scaled(double v, int frac_bits, Rounding mode) {
@@ -216,7 +238,7 @@ inline int64_t round_scaled(double v, int frac_bits, Rounding mode) {
   if (frac_bits < -1000) frac_bits = -1000;
   // v * 2^frac_bits, as std::ldexp gives it (both are the correctly rounded
   // product; 2^frac_bits is a normal double for |frac_bits| <= 1000).
-  const double s = v * std::bit_cast<double>(uint64_t(1023 + frac_bits) << 52);
+  const double s = v * pow2(frac_bits);
   if (s == 0.0) {
     // A negative v whose scaled value underflowed lies in (-1, 0).
     return (v < 0.0 && mode == Rounding::Floor) ? -1 : 0;
@@ -276,7 +298,7 @@ inline int64_t round_scaled_small(double v, double scale) {
 // frac_bits and |q| < 2^63 (std::ldexp, a library call, for the rest).
 inline double from_fixed(int64_t q, int frac_bits) {
   if (frac_bits < -960 || frac_bits > 960) return std::ldexp(double(q), -frac_bits);
-  return double(q) * std::bit_cast<double>(uint64_t(1023 - frac_bits) << 52);
+  return double(q) * pow2(-frac_bits);
 }
 
 }  // namespace edrnr::fx
