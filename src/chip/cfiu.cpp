@@ -40,18 +40,18 @@ Cfiu::Cfiu(const SceneModel& model, const ChipNumerics& numerics, const FeatureC
 }
 
 void Cfiu::interpolate(uint32_t block, const SampleCoord& s, int32_t* out) {
-  read_corners(block, s);
+  read_corners(block, s.local);
   weighted_sum(block, s, out);
 }
 
-int Cfiu::read_corners(uint32_t block, const SampleCoord& s) {
+int Cfiu::read_corners(uint32_t block, const Vec3i& local) {
   const int line = cache_.use(block);
   // Each bank serves its corners; the coefficients are reordered to meet them.
   int conflicts = 0;
   if (cache_.layout().corners_one_per_bank()) {
     for (uint64_t& reads : counters_.bank_reads) ++reads;
   } else {
-    const std::array<int, 8> banks = cache_.layout().corner_banks(line, s.local);
+    const std::array<int, 8> banks = cache_.layout().corner_banks(line, local);
     for (int c = 0; c < 8; ++c) ++counters_.bank_reads[size_t(banks[size_t(c)])];
     conflicts = BankLayout::conflict_cycles(banks);
   }

@@ -48,10 +48,13 @@ class Cfiu {
   // The same as read_corners() followed by weighted_sum().
   void interpolate(uint32_t block, const SampleCoord& s, int32_t* out);
 
-  // The bank side of interpolate(): reads the sample's 8 corners from the
-  // line of `block` (which becomes most recently used) and counts the bank
-  // reads. Returns the extra cycles its bank conflicts cost.
-  int read_corners(uint32_t block, const SampleCoord& s);
+  // The bank side of interpolate(): reads the 8 corners of the sample at
+  // micro voxel `local` of its fine voxel from the line of `block` (which
+  // becomes most recently used) and counts the bank reads. Returns the extra
+  // cycles its bank conflicts cost.
+  int read_corners(uint32_t block, const Vec3i& local);
+  // Whether read_corners() can find bank conflicts (it ignores `local` when not).
+  bool corners_can_conflict() const { return !cache_.layout().corners_one_per_bank(); }
   // The arithmetic side of interpolate(): the F features of the sample from
   // the model's codes of `block`. Reads only the model and the numerics, so it
   // may run on another thread while the cache changes. The sum is exact, so

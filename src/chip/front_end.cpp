@@ -47,8 +47,14 @@ FrontEnd::FrontEnd(const SceneModel& model, const Camera& camera, const ChipNume
 }
 
 RayPacket FrontEnd::build(const PixelQuad& quad, const Vru& vru) {
-  const auto rays = gen_.generate(quad);
   RayPacket p;
+  build(quad, vru, p);
+  return p;
+}
+
+void FrontEnd::build(const PixelQuad& quad, const Vru& vru, RayPacket& p) {
+  const auto rays = gen_.generate(quad);
+  p.reset();
   p.pixels = quad;
   bool first = true;
   for (int r = 0; r < kRaysPerPacket; ++r) {
@@ -72,9 +78,8 @@ RayPacket FrontEnd::build(const PixelQuad& quad, const Vru& vru) {
     }
     s.k = run.begin;
     s.k_end = run.end;
-    if (encode_directions_) s.dir_code = Tme::encode_direction(s.world_dir, model_.mlp_arch.dir_frequencies, n_);
+    if (encode_directions_) Tme::encode_direction(s.world_dir, model_.mlp_arch.dir_frequencies, n_, s.dir_code);
   }
-  return p;
 }
 
 }  // namespace edrnr::chip

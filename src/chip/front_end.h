@@ -37,6 +37,8 @@ class FrontEnd {
   // The packet of `quad`. Its live_mask() is 0 when no ray reaches the
   // traversal (all pixels take the background).
   RayPacket build(const PixelQuad& quad, const Vru& vru);
+  // The same packet built in p, whatever p held (its vectors' storage is reused).
+  void build(const PixelQuad& quad, const Vru& vru, RayPacket& p);
   // On (the default): build() fills each traversed ray's dir_code. Off: it
   // leaves dir_code empty for the consumer to encode (Tme::encode_direction
   // of world_dir) where the ray's samples are evaluated.

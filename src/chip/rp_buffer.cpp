@@ -7,6 +7,24 @@
 
 namespace edrnr::chip {
 
+void RayState::reset() {
+  std::vector<int32_t> code = std::move(dir_code), x = std::move(dir_input.x);
+  std::vector<int64_t> term = std::move(dir_input.terms.term);
+  *this = RayState{};
+  code.clear();
+  x.clear();
+  term.clear();
+  dir_code = std::move(code);
+  dir_input.x = std::move(x);
+  dir_input.terms.term = std::move(term);
+}
+
+void RayPacket::reset() {
+  pixels = PixelQuad{};
+  for (RayState& r : rays) r.reset();
+  travel_sign = RayPacket{}.travel_sign;
+}
+
 uint8_t RayPacket::live_mask() const {
   uint8_t m = 0;
   for (int r = 0; r < kRaysPerPacket; ++r)
@@ -17,6 +35,7 @@ uint8_t RayPacket::live_mask() const {
 RpBuffer::RpBuffer(int capacity) {
   if (capacity < 1) fail("RP buffer capacity must be at least 1 (got {})", capacity);
   slots_.resize(size_t(capacity));
+  for (std::unique_ptr<RayPacket>& s : slots_) s = std::make_unique<RayPacket>();
   used_.assign(size_t(capacity), 0);
 }
 

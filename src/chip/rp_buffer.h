@@ -4,6 +4,7 @@
 // pipeline in its place. Its capacity bounds the number of RPs in flight.
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -37,6 +38,9 @@ struct RayState {
 
   // Still marching: not stopped by the VRU and not past the box.
   bool live() const { return valid && !terminated && k < k_end; }
+  // Back to a default-constructed ray, its vectors emptied but keeping
+  // their storage.
+  void reset();
 };
 
 struct RayPacket {
@@ -45,6 +49,8 @@ struct RayPacket {
   Vec3i travel_sign{1, 1, 1};  // per axis, the direction sign of the first valid ray (LFAU orientation)
 
   uint8_t live_mask() const;
+  // Back to a default-constructed packet (RayState::reset).
+  void reset();
 };
 
 class RpBuffer {
@@ -55,8 +61,12 @@ class RpBuffer {
   // The lowest free RP pointer, or nothing when the buffer is full.
   std::optional<uint32_t> allocate();
   void release(uint32_t rp);  // throws std::logic_error unless allocated
-  RayPacket& operator[](uint32_t rp) { return slots_[rp]; }
-  const RayPacket& operator[](uint32_t rp) const { return slots_[rp]; }
+  RayPacket& operator[](uint32_t rp) { return *slots_[rp]; }
+  const RayPacket& operator[](uint32_t rp) const { return *slots_[rp]; }
+  // Puts packet p (not null) in slot rp and hands back the packet the slot
+  // held, without copying either: each slot's packet lives in its own
+  // allocation, which moves with it.
+  void exchange(uint32_t rp, std::unique_ptr<RayPacket>& p) { slots_[rp].swap(p); }
 
   int capacity() const { return int(slots_.size()); }
   int in_use() const { return in_use_; }
@@ -64,7 +74,7 @@ class RpBuffer {
   int peak_in_use() const { return peak_; }
 
  private:
-  std::vector<RayPacket> slots_;
+  std::vector<std::unique_ptr<RayPacket>> slots_;
   std::vector<uint8_t> used_;
   int in_use_ = 0, peak_ = 0;
 };

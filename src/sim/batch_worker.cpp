@@ -49,6 +49,13 @@ constexpr std::chrono::microseconds kMainSpin{100}, kWorkerSpin{2000};
 
 // ------------------------------------------------------------ BatchArithmetic
 
+void make_coords(const RayMath& math, const ChipNumerics& n, const RayPacket& p, Flight& f) {
+  f.coords.clear();
+  for (const SampleRef& s : f.samples)
+    f.coords.push_back(sample_coordinate(math, p.rays[s.ray].ray, s.k, n.interp_fraction_bits, n.rounding));
+  f.coords_made = true;
+}
+
 BatchArithmetic::BatchArithmetic(const SceneModel& model, const ChipConfig& config, const ChipNumerics& n,
                                  const RayMath& math, const Cfiu& cfiu, double delta)
     : model_(model),
@@ -73,8 +80,8 @@ TmeDirection* BatchArithmetic::direction_of(RayState& ray) {
 }
 
 void BatchArithmetic::finish(RayPacket& p, Flight& f, size_t first) {
-  for (size_t i = 0; i < f.coords.size(); ++i)
-    vru_.composite(p.rays[f.rays[i]], outputs_[first + i].alpha, outputs_[first + i].rgb);
+  for (size_t i = 0; i < f.samples.size(); ++i)
+    vru_.composite(p.rays[f.samples[i].ray], outputs_[first + i].alpha, outputs_[first + i].rgb);
   f.stay = has_live_ray_in(math_, model_, p, f.cv_tag);
 }
 
@@ -84,6 +91,7 @@ void BatchArithmetic::run(RayPacket& p, Flight& f) {
 }
 
 void BatchArithmetic::defer(RayPacket& p, Flight& f) {
+  if (!f.coords_made) make_coords(math_, n_, p, f);
   tme_.load(f.cv_tag);
   f.deferred = true;
   deferred_.push_back({&p, &f, tme_.current_mlp()});
@@ -101,7 +109,7 @@ void BatchArithmetic::flush() {
     const int32_t mlp = deferred_[order_[g0]].mlp;
     size_t g1 = g0, n = 0;
     for (; g1 < order_.size() && deferred_[order_[g1]].mlp == mlp; ++g1)
-      n += deferred_[order_[g1]].flight->coords.size();
+      n += deferred_[order_[g1]].flight->samples.size();
     if (features_.size() < n * F) features_.resize(n * F);
     if (outputs_.size() < n) {
       outputs_.resize(n);
@@ -111,8 +119,8 @@ void BatchArithmetic::flush() {
     for (size_t j = g0; j < g1; ++j) {
       const Deferred& d = deferred_[order_[j]];
       const Flight& f = *d.flight;
-      for (size_t i = 0; i < f.coords.size(); ++i, ++s) {
-        dir_of_sample_[s] = direction_of(d.packet->rays[f.rays[i]]);
+      for (size_t i = 0; i < f.samples.size(); ++i, ++s) {
+        dir_of_sample_[s] = direction_of(d.packet->rays[f.samples[i].ray]);
         cfiu_.weighted_sum(f.block, f.coords[i], &features_[s * F]);
       }
     }
@@ -152,17 +160,19 @@ bool FrontEndAhead::produce_one() {
   FrontEndPacket& e = ring_[produced % ring_.size()];
   e.quad = zorg_.next();
   const uint64_t evals = front_.tsps_position_evals();
-  e.packet = front_.build(e.quad, vru_);
+  front_.build(e.quad, vru_, *e.packet);
   e.tsps_position_evals = front_.tsps_position_evals() - evals;
   produced_.store(produced + 1, std::memory_order_release);
   return true;
 }
 
-FrontEndPacket FrontEndAhead::take() {
-  FrontEndPacket e = std::move(ring_[consumed_ % ring_.size()]);
+void FrontEndAhead::take(FrontEndPacket& e) {
+  FrontEndPacket& next = ring_[consumed_ % ring_.size()];
+  e.quad = next.quad;
+  e.tsps_position_evals = next.tsps_position_evals;
+  e.packet.swap(next.packet);
   ++consumed_;
   consumed_shared_.store(consumed_, std::memory_order_release);
-  return e;
 }
 
 // ------------------------------------------------------------ FtuAhead
@@ -313,15 +323,14 @@ void Worker::wait(uint64_t seq, Ftu* ftu) {
   rethrow_failure();
 }
 
-FrontEndPacket Worker::take_packet() {
+void Worker::take_packet(FrontEndPacket& e) {
   if (!ahead_->ready()) {
     signal();  // the worker may be asleep with a full ring that just emptied
     main_wait(ahead_->produced(), ahead_->consumed());
   }
   rethrow_failure();
-  FrontEndPacket e = ahead_->take();
+  ahead_->take(e);
   signal();  // room in the ring
-  return e;
 }
 
 void Worker::loop() {

@@ -31,19 +31,25 @@
 namespace edrnr::sim {
 
 // An RP's batch from the FTU until its last sample leaves the VRU. The
-// arithmetic job (weighted sums, MLP, compositing) reads block, cv_tag, coords
-// and rays and writes stay; it may run on the worker thread in between.
+// arithmetic job (sample coordinates unless made, weighted sums, MLP,
+// compositing) reads block, cv_tag, samples and coords and writes coords and
+// stay; it may run on the worker thread in between.
 struct Flight {
   uint32_t slot = 0;   // computation-SRAM slot of the batch (freed when the CFIU has read it)
   uint32_t block = 0;  // feature block (its line stays reserved until then)
   uint32_t cv_tag = 0;
   std::vector<uint8_t> sample_cycles;     // CFIU cycles per sample (1 + bank conflicts)
-  std::vector<chip::SampleCoord> coords;  // SCC output per sample
-  std::vector<uint8_t> rays;              // ray of each sample
+  std::vector<chip::SampleRef> samples;   // the batch's samples, taken from its computation-SRAM slot
+  std::vector<chip::SampleCoord> coords;  // SCC output per sample, once coords_made
+  bool coords_made = false;               // by the engine when the CFIU's bank reads need them, else by the job
   bool stay = false;                      // a live ray is still in the CV: reschedule; else leave it
   uint64_t job = 0;                       // job sequence number
   bool deferred = false;                  // BatchArithmetic::defer() holds it until flush()
 };
+
+// Makes f.coords (the SCC output of each of f.samples, rays of p) and sets
+// f.coords_made.
+void make_coords(const chip::RayMath& math, const ChipNumerics& n, const chip::RayPacket& p, Flight& f);
 
 // The arithmetic of batches: interpolation sums, the TME and the VRU, with
 // their own unit instances, so that it can run on a thread of its own.
@@ -52,9 +58,10 @@ class BatchArithmetic {
   BatchArithmetic(const SceneModel& model, const ChipConfig& config, const ChipNumerics& n, const chip::RayMath& math,
                   const chip::Cfiu& cfiu, double delta);
 
-  // The interpolation sums of every sample, the TME on the whole batch (the
-  // direction inputs once per ray), then compositing in sample order; sets
-  // f.stay (defer() then flush(): a group of one).
+  // The sample coordinates unless made, the interpolation sums of every
+  // sample, the TME on the whole batch (the direction inputs once per ray),
+  // then compositing in sample order; sets f.stay (defer() then flush(): a
+  // group of one).
   void run(chip::RayPacket& p, Flight& f);
   // run(p, f) deferred (one thread): the MLP load is counted now, in the
   // order run() would count it, and the arithmetic waits for flush(), which
@@ -97,9 +104,11 @@ class BatchArithmetic {
 
 // One front-end packet: the quad ZORG issued, its packet and the TSPS
 // position evaluations spent on it (its front-end cycles follow from them).
+// The packet lives in its own allocation, handed between the threads
+// without copying it.
 struct FrontEndPacket {
   chip::PixelQuad quad;
-  chip::RayPacket packet;
+  std::unique_ptr<chip::RayPacket> packet = std::make_unique<chip::RayPacket>();
   uint64_t tsps_position_evals = 0;
 };
 
@@ -117,10 +126,11 @@ class FrontEndAhead {
   // than a quarter of the ring's packets are ready.
   bool can_produce() const;
   bool running_low() const;
-  // Consumer: whether the next packet is ready; take() moves it out.
+  // Consumer: whether the next packet is ready; take() swaps it into e (whose
+  // packet, not null, the ring builds a later packet in).
   // Precondition of take(): ready().
   bool ready() const { return produced_.load(std::memory_order_acquire) != consumed_; }
-  FrontEndPacket take();
+  void take(FrontEndPacket& e);
 
   std::atomic<uint64_t>& produced() { return produced_; }
   uint64_t consumed() const { return consumed_; }
@@ -214,8 +224,9 @@ class Worker {
   // an exception a job threw. With `ftu` (the engine's), pending FTU runs
   // are made with it meanwhile, as long as the job is not done.
   void wait(uint64_t seq, chip::Ftu* ftu = nullptr);
-  // The next front-end packet, waiting for it if need be.
-  FrontEndPacket take_packet();
+  // The next front-end packet, swapped into e (FrontEndAhead::take), waiting
+  // for it if need be.
+  void take_packet(FrontEndPacket& e);
 
  private:
   void loop();

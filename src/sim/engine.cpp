@@ -167,7 +167,7 @@ inline void Engine::step_front_end() {
   if (fe_.holding && c >= fe_.end) {
     if (!fe_.live) {  // background only: no pointer needed
       ++packets_dropped_;
-      write_pixels(fe_.packet);
+      write_pixels(*fe_.packet.packet);
       write_output_record(fe_.sequence);
       ++rps_done_;
       fe_.holding = false;
@@ -175,7 +175,7 @@ inline void Engine::step_front_end() {
       st = UnitState::StallOutput;
     } else {
       const uint32_t rp = *buffer_.allocate();
-      buffer_[rp] = std::move(fe_.packet);
+      buffer_.exchange(rp, fe_.packet.packet);  // the slot's old packet is built in next
       sequence_[rp] = fe_.sequence;
       fe_out_.push(rp, c);
       fe_.holding = false;
@@ -185,21 +185,21 @@ inline void Engine::step_front_end() {
     const PixelQuad quad = zorg_.next();
     uint64_t evals = 0;
     if (worker_) {  // built ahead on the worker thread, in the same order
-      FrontEndPacket e = worker_->take_packet();
+      FrontEndPacket& e = fe_.packet;
+      worker_->take_packet(e);
       if (e.quad.sequence != quad.sequence)
         throw std::logic_error(
             fmt::format("cycle simulator: front-end packet {} arrived for quad {}", e.quad.sequence, quad.sequence));
-      fe_.packet = std::move(e.packet);
       evals = e.tsps_position_evals;
     } else {
       const uint64_t before = front_.tsps_position_evals();
-      fe_.packet = front_.build(quad, vru_);
+      front_.build(quad, vru_, *fe_.packet.packet);
       evals = front_.tsps_position_evals() - before;
     }
     const uint64_t tsps_cycles = ceil_div(evals, uint64_t(t_.tsps_position_evals_per_cycle));
     fe_.end = c + std::max<uint64_t>(uint64_t(t_.zorg_cycles_per_rp), tsps_cycles);
     fe_.sequence = quad.sequence;
-    fe_.live = fe_.packet.live_mask() != 0;
+    fe_.live = fe_.packet.packet->live_mask() != 0;
     fe_.holding = true;
   }
   if (fe_.holding && c < fe_.end) st = UnitState::Busy;
@@ -361,21 +361,18 @@ inline void Engine::step_issue() {
 // the samples, the model and its RP's rays, and the RP has no other batch
 // in flight. On one thread it is deferred until a batch's results are
 // needed (complete_batch), so that the deferred batches of one MLP run
-// through the TME together. The sample coordinates are computed here, for
-// the CFIU's bank reads at issue.
+// through the TME together. The sample coordinates are computed here when
+// the CFIU's bank reads at issue need them, else by the job (on the worker,
+// with two threads: the timing thread then touches none of them).
 inline void Engine::start_batch(uint32_t rp, uint32_t slot) {
-  const SampleBatch& batch = batches_[slot];
+  SampleBatch& batch = batches_[slot];
   Flight& f = flights_[rp];
   f.slot = slot;
   f.block = uint32_t(batch.block);
   f.cv_tag = batch.cv_tag;
-  f.coords.clear();
-  f.rays.clear();
-  const RayPacket& p = buffer_[rp];
-  for (const SampleRef& sref : batch.samples) {
-    f.coords.push_back(sample_coordinate(math_, p.rays[sref.ray].ray, sref.k, n_.interp_fraction_bits, n_.rounding));
-    f.rays.push_back(sref.ray);
-  }
+  std::swap(f.samples, batch.samples);
+  f.coords_made = false;
+  if (cfiu_.corners_can_conflict()) make_coords(math_, n_, buffer_[rp], f);
   if (worker_)
     f.job = worker_->submit(rp);
   else
@@ -387,8 +384,9 @@ inline void Engine::start_batch(uint32_t rp, uint32_t slot) {
 inline void Engine::issue(const LsEntry& e) {
   Flight& f = flights_[e.rp];
   f.sample_cycles.clear();
-  for (const SampleCoord& sc : f.coords) {
-    const int conflicts = cfiu_.read_corners(e.block, sc);
+  const bool can_conflict = cfiu_.corners_can_conflict();  // then start_batch made the coordinates
+  for (size_t i = 0; i < f.samples.size(); ++i) {
+    const int conflicts = cfiu_.read_corners(e.block, can_conflict ? f.coords[i].local : Vec3i{});
     f.sample_cycles.push_back(uint8_t(std::min(255, t_.cfiu_cycles_per_sample + conflicts)));
   }
   cfiu_s_ = {true, e.rp, 0, f.sample_cycles[0], cycle_ + 1};
@@ -502,7 +500,7 @@ inline void Engine::step_tme() {
 // A batch reaching the TME: the per-batch and per-access MLP hit rates.
 inline void Engine::count_mlp_batch(const SampleToken& first, bool on_chip) {
   mlp_series_.record(cycle_, on_chip);
-  count_per_access(mlp_access_, on_chip, flights_[first.rp].coords.size());
+  count_per_access(mlp_access_, on_chip, flights_[first.rp].samples.size());
 }
 
 // VRU: composites one sample per vru_cycles_per_sample; after a batch's last

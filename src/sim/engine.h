@@ -169,7 +169,7 @@ class Engine {
     bool live = false;  // the packet has a ray to traverse (else only background pixels)
     uint64_t end = 0;
     uint64_t sequence = 0;
-    RayPacket packet;
+    FrontEndPacket packet;  // its quad and evaluations are used with two threads only
   };
   struct CtuShell {
     bool holding = false;

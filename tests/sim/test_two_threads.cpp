@@ -77,15 +77,16 @@ TEST(Shortcuts, FrontEndPacketsBuiltAheadMatchThoseBuiltInOrder) {
   FrontEndAhead ahead(zorg, ahead_front, vru, 4);
   chip::Zorg order = zorg;
   size_t packets = 0, traversed = 0;
+  FrontEndPacket e;
   while (!order.done()) {
     while (!ahead.ready()) ASSERT_TRUE(ahead.produce_one());
-    const FrontEndPacket e = ahead.take();
+    ahead.take(e);
     const chip::PixelQuad quad = order.next();
     const uint64_t evals = front.tsps_position_evals();
     const chip::RayPacket p = front.build(quad, vru);
     ASSERT_EQ(e.quad.sequence, quad.sequence);
     EXPECT_EQ(e.tsps_position_evals, front.tsps_position_evals() - evals);
-    expect_same_rays(e.packet, p);
+    expect_same_rays(*e.packet, p);
     ++packets;
     traversed += p.live_mask() != 0;
   }
