@@ -237,9 +237,14 @@ Tme::Tme(const SceneModel& model, const ChipNumerics& numerics, double delta, si
   }
 }
 
-void Tme::load(uint32_t cv_tag) {
+int32_t Tme::mlp_of(uint32_t cv_tag) const {
   const int32_t m = model_.coarse_to_mlp.at(cv_tag);
   if (m < 0) fail("coarse voxel {} is occupied but has no MLP (the model breaks its invariants)", cv_tag);
+  return m;
+}
+
+void Tme::load(uint32_t cv_tag) {
+  const int32_t m = mlp_of(cv_tag);
   if (m == current_) return;
   current_ = m;
   ++counters_.mlp_loads;

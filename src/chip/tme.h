@@ -152,6 +152,8 @@ class Tme {
 
   // Makes the MLP of CV `cv_tag` current (a load when it is not already).
   void load(uint32_t cv_tag);
+  // The index of CV cv_tag's MLP. Throws Error when it has none.
+  int32_t mlp_of(uint32_t cv_tag) const;
   // The current MLP's index (-1 before the first load).
   int32_t current_mlp() const { return current_; }
   // Makes MLP `index` current without counting a load: for evaluating work

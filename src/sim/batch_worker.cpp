@@ -86,7 +86,9 @@ void BatchArithmetic::finish(RayPacket& p, Flight& f, size_t first) {
 }
 
 void BatchArithmetic::run(RayPacket& p, Flight& f) {
-  defer(p, f);
+  if (!f.coords_made) make_coords(math_, n_, p, f);
+  f.deferred = true;
+  deferred_.push_back({&p, &f, tme_.mlp_of(f.cv_tag)});
   flush();
 }
 
@@ -135,7 +137,7 @@ void BatchArithmetic::flush() {
     }
     g0 = g1;
   }
-  tme_.select(loaded);
+  if (loaded >= 0) tme_.select(loaded);  // run() loads none
   deferred_.clear();
 }
 
@@ -187,8 +189,12 @@ void run_ftu(Ftu& ftu, RayPacket& p, uint32_t rp, uint32_t cv_tag, FtuRun& out) 
   out.counts -= before;
 }
 
-FtuAhead::FtuAhead(const SceneModel& model, const RayMath& math, bool lag_first, RpBuffer& buffer)
-    : buffer_(buffer), ftu_(model, math, lag_first, 0), slots_(new Slot[size_t(buffer.capacity())]) {}
+FtuAhead::FtuAhead(const SceneModel& model, const RayMath& math, bool lag_first, RpBuffer& buffer,
+                   BatchArithmetic& arithmetic)
+    : buffer_(buffer),
+      arithmetic_(arithmetic),
+      ftu_(model, math, lag_first, 0),
+      slots_(new Slot[size_t(buffer.capacity())]) {}
 
 // The state and queued flags are sequentially consistent: when the engine
 // finds a job still queued after pend(), that job's try_run() comes later in
@@ -203,9 +209,19 @@ bool FtuAhead::needs_job(uint32_t rp) { return !slots_[rp].queued.exchange(true)
 
 void FtuAhead::job_started(uint32_t rp) { slots_[rp].queued.store(false); }
 
-void FtuAhead::run_slot(Slot& s, uint32_t rp, Ftu& ftu) {
+void FtuAhead::run_slot(Slot& s, uint32_t rp, Ftu& ftu, BatchArithmetic* arithmetic) {
+  s.flight_made = false;
   try {
     run_ftu(ftu, buffer_[rp], rp, s.cv_tag, s.run);
+    if (arithmetic && s.run.has_batch) {
+      Flight& f = s.flight;
+      f.block = uint32_t(s.run.batch.block);
+      f.cv_tag = s.run.batch.cv_tag;
+      std::swap(f.samples, s.run.batch.samples);
+      f.coords_made = false;
+      arithmetic->run(buffer_[rp], f);
+      s.flight_made = true;
+    }
   } catch (...) {
     s.error = std::current_exception();
   }
@@ -220,7 +236,7 @@ bool FtuAhead::run_any_pending(Ftu& ftu) {
     if (s.state.load(std::memory_order_relaxed) != kPending) continue;
     uint8_t expected = kPending;
     if (!s.state.compare_exchange_strong(expected, kRunning)) continue;
-    run_slot(s, rp, ftu);
+    run_slot(s, rp, ftu, nullptr);
     steal_from_ = rp + 1;
     return true;
   }
@@ -230,14 +246,16 @@ bool FtuAhead::run_any_pending(Ftu& ftu) {
 void FtuAhead::try_run(uint32_t rp) {
   Slot& s = slots_[rp];
   uint8_t expected = kPending;
-  if (s.state.compare_exchange_strong(expected, kRunning)) run_slot(s, rp, ftu_);
+  if (s.state.compare_exchange_strong(expected, kRunning)) run_slot(s, rp, ftu_, &arithmetic_);
 }
+
+Flight* FtuAhead::made_flight(uint32_t rp) { return slots_[rp].flight_made ? &slots_[rp].flight : nullptr; }
 
 FtuRun& FtuAhead::take(uint32_t rp, uint32_t cv_tag, Ftu& ftu) {
   Slot& s = slots_[rp];
   uint8_t expected = kPending;
   if (s.state.compare_exchange_strong(expected, kRunning, std::memory_order_acquire)) {
-    run_slot(s, rp, ftu);
+    run_slot(s, rp, ftu, nullptr);
   } else if (expected == kNone) {
     throw std::logic_error(fmt::format("cycle simulator: RP {} scheduled with no FTU run pending", rp));
   } else {

@@ -45,6 +45,7 @@ struct Flight {
   bool stay = false;                      // a live ray is still in the CV: reschedule; else leave it
   uint64_t job = 0;                       // job sequence number
   bool deferred = false;                  // BatchArithmetic::defer() holds it until flush()
+  bool made = false;                      // made with its FTU run (FtuAhead): no job
 };
 
 // Makes f.coords (the SCC output of each of f.samples, rays of p) and sets
@@ -60,8 +61,9 @@ class BatchArithmetic {
 
   // The sample coordinates unless made, the interpolation sums of every
   // sample, the TME on the whole batch (the direction inputs once per ray),
-  // then compositing in sample order; sets f.stay (defer() then flush(): a
-  // group of one).
+  // then compositing in sample order; sets f.stay. CV f.cv_tag's MLP is
+  // selected without counting a load: the caller counts the loads in the
+  // hardware's order (defer() counts them).
   void run(chip::RayPacket& p, Flight& f);
   // run(p, f) deferred (one thread): the MLP load is counted now, in the
   // order run() would count it, and the arithmetic waits for flush(), which
@@ -162,10 +164,14 @@ void run_ftu(chip::Ftu& ftu, chip::RayPacket& p, uint32_t rp, uint32_t cv_tag, F
 // final for it (the CTU found its next CV, or a batch ended with a live ray
 // still in the CV), by whichever thread gets to it first: the worker, or the
 // engine when it schedules the RP. The run reads and writes that RP's rays
-// alone, so its result is the same whoever makes it and whenever.
+// alone, so its result is the same whoever makes it and whenever. The
+// worker makes the arithmetic of the run's batch right after it (the next
+// thing to happen to those rays), so that the engine need not wait for it.
 class FtuAhead {
  public:
-  FtuAhead(const SceneModel& model, const chip::RayMath& math, bool lag_first, chip::RpBuffer& buffer);
+  // arithmetic: the worker's.
+  FtuAhead(const SceneModel& model, const chip::RayMath& math, bool lag_first, chip::RpBuffer& buffer,
+           BatchArithmetic& arithmetic);
 
   // Either thread: rp's run in CV cv_tag may be made (none of rp's is pending).
   void pend(uint32_t rp, uint32_t cv_tag);
@@ -176,11 +182,17 @@ class FtuAhead {
   bool needs_job(uint32_t rp);
   // Worker: the job of rp started (needs_job(rp) is true again).
   void job_started(uint32_t rp);
-  // Worker: makes rp's run with the worker's FTU unless someone started it.
+  // Worker: makes rp's run with the worker's FTU, and its batch's arithmetic,
+  // unless someone started it.
   void try_run(uint32_t rp);
   // Engine: rp's run in cv_tag, made now with `ftu` if nobody started it,
-  // else waited for. Rethrows what the run threw. Valid until pend(rp).
+  // else waited for. Rethrows what the run or its arithmetic threw. Valid
+  // until pend(rp).
   FtuRun& take(uint32_t rp, uint32_t cv_tag, chip::Ftu& ftu);
+  // Engine, after take(rp): the flight of the run's batch (block, cv_tag,
+  // samples, coords, stay; the batch's samples moved into it) when the
+  // worker made its arithmetic with the run, else null. Valid until pend(rp).
+  Flight* made_flight(uint32_t rp);
   // Engine, while it waits: makes one pending run nobody started with `ftu`
   // (take() then finds it made); false when there is none.
   bool run_any_pending(chip::Ftu& ftu);
@@ -192,11 +204,15 @@ class FtuAhead {
     std::atomic<bool> queued{false};  // a job for this RP's run is queued and not started
     uint32_t cv_tag = 0;
     FtuRun run;
+    Flight flight;  // the batch's arithmetic, when made with the run
+    bool flight_made = false;
     std::exception_ptr error;
   };
-  void run_slot(Slot& slot, uint32_t rp, chip::Ftu& ftu);
+  // Makes slot's run with `ftu` and, given `arithmetic`, its batch's arithmetic.
+  void run_slot(Slot& slot, uint32_t rp, chip::Ftu& ftu, BatchArithmetic* arithmetic);
 
   chip::RpBuffer& buffer_;
+  BatchArithmetic& arithmetic_;
   chip::Ftu ftu_;                  // the worker's
   uint32_t steal_from_ = 0;        // run_any_pending's next RP to look at
   std::unique_ptr<Slot[]> slots_;  // by RP pointer

@@ -88,7 +88,7 @@ Engine::Engine(const SceneModel& model, const Camera& camera, const SimConfig& c
   tme_cycles_per_sample_ = std::max<uint64_t>(1, ceil_div(macs, uint64_t(t_.tme_macs_per_cycle)));
   if (options.threads > 1) {
     ahead_ = std::make_unique<FrontEndAhead>(zorg_, front_, vru_, kFrontEndAheadPackets);
-    ftu_ahead_ = std::make_unique<FtuAhead>(model, math_, config.chip.switches.lag_first, buffer_);
+    ftu_ahead_ = std::make_unique<FtuAhead>(model, math_, config.chip.switches.lag_first, buffer_, arithmetic_);
     worker_ = std::make_unique<Worker>(arithmetic_, buffer_, flights_, rp_capacity_, ahead_.get(), ftu_ahead_.get());
   }
 }
@@ -262,7 +262,7 @@ inline void Engine::step_ftu() {
           st = UnitState::StallMemory;  // no MSHR entry or no line free
         } else {
           feature_series_.record(c, a == CacheAccess::Hit);
-          count_per_access(feature_access_, a == CacheAccess::Hit, batches_[s.slot].samples.size());
+          count_per_access(feature_access_, a == CacheAccess::Hit, flights_[s.rp].samples.size());
           if (a == CacheAccess::MissAllocated)
             mem_.read(DataType::Features, map_.feature_block(block), uint32_t(map_.feature_block_bytes), block, c);
           ooo_.push({s.rp, block, s.slot});
@@ -291,6 +291,15 @@ inline void Engine::step_ftu() {
         run_ftu(ftu_, buffer_[sched.rp], sched.rp, sched.tag, ftu_run_);
       s.has_batch = run->has_batch;
       std::swap(batches_[s.slot], run->batch);
+      // The RP's flight is free (its previous batch is complete): the batch's
+      // samples, or its whole flight when the worker made its arithmetic.
+      Flight& f = flights_[sched.rp];
+      Flight* made = ftu_ahead_ ? ftu_ahead_->made_flight(sched.rp) : nullptr;
+      if (made)
+        std::swap(f, *made);
+      else if (s.has_batch)
+        std::swap(f.samples, batches_[s.slot].samples);
+      f.made = made != nullptr;
       const FtuCounters& d = run->counts;
       ftu_counts_ += d;
       const uint64_t cycles = d.iterations * uint64_t(t_.ftu_cycles_per_iteration) +
@@ -307,6 +316,10 @@ inline void Engine::step_ftu() {
       s.holding = true;
       s.output = false;
       ++ftu_runs_;
+      if (made && f.stay) {  // the rays are final for the RP's next run in the CV: the worker may make it now
+        ftu_ahead_->pend(sched.rp, f.cv_tag);
+        if (ftu_ahead_->needs_job(sched.rp)) worker_->submit_ftu(sched.rp);
+      }
     }
   }
   if (s.holding && !s.output) {
@@ -365,12 +378,13 @@ inline void Engine::step_issue() {
 // the CFIU's bank reads at issue need them, else by the job (on the worker,
 // with two threads: the timing thread then touches none of them).
 inline void Engine::start_batch(uint32_t rp, uint32_t slot) {
-  SampleBatch& batch = batches_[slot];
+  const SampleBatch& batch = batches_[slot];
   Flight& f = flights_[rp];
   f.slot = slot;
+  if (worker_) count_mlp_load(batch.cv_tag);  // the worker's arithmetic counts none
+  if (f.made) return;                         // its arithmetic is done
   f.block = uint32_t(batch.block);
   f.cv_tag = batch.cv_tag;
-  std::swap(f.samples, batch.samples);
   f.coords_made = false;
   if (cfiu_.corners_can_conflict()) make_coords(math_, n_, buffer_[rp], f);
   if (worker_)
@@ -384,7 +398,7 @@ inline void Engine::start_batch(uint32_t rp, uint32_t slot) {
 inline void Engine::issue(const LsEntry& e) {
   Flight& f = flights_[e.rp];
   f.sample_cycles.clear();
-  const bool can_conflict = cfiu_.corners_can_conflict();  // then start_batch made the coordinates
+  const bool can_conflict = cfiu_.corners_can_conflict();  // then the coordinates are made (start_batch, or made)
   for (size_t i = 0; i < f.samples.size(); ++i) {
     const int conflicts = cfiu_.read_corners(e.block, can_conflict ? f.coords[i].local : Vec3i{});
     f.sample_cycles.push_back(uint8_t(std::min(255, t_.cfiu_cycles_per_sample + conflicts)));
@@ -497,6 +511,14 @@ inline void Engine::step_tme() {
   set_state(kTme, st);
 }
 
+inline void Engine::count_mlp_load(uint32_t cv_tag) {
+  const int32_t m = arithmetic_.tme().mlp_of(cv_tag);
+  if (m == loaded_mlp_) return;
+  loaded_mlp_ = m;
+  ++mlp_loads_;
+  mlp_load_bytes_ += arithmetic_.tme().mlp(size_t(m)).stored_bytes;
+}
+
 // A batch reaching the TME: the per-batch and per-access MLP hit rates.
 inline void Engine::count_mlp_batch(const SampleToken& first, bool on_chip) {
   mlp_series_.record(cycle_, on_chip);
@@ -527,9 +549,9 @@ inline void Engine::step_vru() {
 
 inline void Engine::complete_batch(uint32_t rp) {
   Flight& f = flights_[rp];
-  if (worker_)
-    worker_->wait(f.job, &ftu_);
-  else if (f.deferred)
+  if (worker_) {
+    if (!f.made) worker_->wait(f.job, &ftu_);
+  } else if (f.deferred)
     arithmetic_.flush();
   if (f.stay) {
     ++fine_reschedules_;

@@ -114,6 +114,9 @@ class Engine {
   void step_tme();
   // A batch reaching the TME: the per-batch and per-access MLP hit rates.
   void count_mlp_batch(const SampleToken& first, bool on_chip);
+  // With two threads: the TME's MLP loads, counted as batches start (in the
+  // order the TME takes them), since the worker's arithmetic counts none.
+  void count_mlp_load(uint32_t cv_tag);
   // VRU: composites one sample per vru_cycles_per_sample; after a batch's last
   // sample the RP is rescheduled or leaves its CV.
   void step_vru();
@@ -272,6 +275,8 @@ class Engine {
   uint64_t cycle_ = 0, cycles_ = 0, skipped_cycles_ = 0;
   UnitState quiet_state_[kUnits] = {};  // each unit's state in the cycles quiet_until() found
   bool bitmaps_ready_ = false;
+  int32_t loaded_mlp_ = -1;  // count_mlp_load's: the TME's current MLP
+  uint64_t mlp_loads_ = 0, mlp_load_bytes_ = 0;
   bool any_busy_ = false;
   uint64_t mlp_lines_ = 0, macs_per_sample_ = 0, neurons_per_sample_ = 0, tme_cycles_per_sample_ = 1;
   uint64_t rps_done_ = 0, packets_dropped_ = 0, rps_finished_ = 0, cv_transitions_ = 0, fine_reschedules_ = 0;

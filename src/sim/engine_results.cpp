@@ -25,6 +25,10 @@ ChipCounters Engine::chip_counters() const {
   ChipCounters c =
       unit_counters({zorg_, front_, ctu_, ftu_, rob_, ooo_, cfiu_, arithmetic_.tme(), arithmetic_.vru(), buffer_});
   c.ftu = ftu_counts_;
+  if (ftu_ahead_) {  // two threads (the worker has stopped by now)
+    c.tme.mlp_loads = mlp_loads_;
+    c.tme.mlp_load_bytes = mlp_load_bytes_;
+  }
   c.packets_dropped = packets_dropped_;
   c.cv_transitions = cv_transitions_;
   c.fine_reschedules = fine_reschedules_;
