@@ -1,6 +1,7 @@
 #include "chip/rp_buffer.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <stdexcept>
 
 #include "core/error.h"
@@ -8,15 +9,27 @@
 namespace edrnr::chip {
 
 void RayState::reset() {
-  std::vector<int32_t> code = std::move(dir_code), x = std::move(dir_input.x);
-  std::vector<int64_t> term = std::move(dir_input.terms.term);
-  *this = RayState{};
-  code.clear();
-  x.clear();
-  term.clear();
-  dir_code = std::move(code);
-  dir_input.x = std::move(x);
-  dir_input.terms.term = std::move(term);
+  // Field by field: the vectors keep their storage, and the exit memo's
+  // crossings (half the ray's bytes) are not written.
+#if defined(__GLIBCXX__) && !defined(_GLIBCXX_DEBUG) && UINTPTR_MAX == UINT64_MAX
+  static_assert(sizeof(RayState) == 384, "RayState changed: reset its new fields here, then update the size");
+#endif
+  valid = false;
+  terminated = false;
+  ray = {};
+  world_dir = {};
+  k = 0;
+  k_end = 0;
+  transmittance = 0;
+  color = {};
+  dir_code.clear();
+  dir_input.x.clear();
+  dir_input.saturations = 0;
+  dir_input.terms.term.clear();
+  dir_input.terms.saturations = 0;
+  dir_input.terms_tme = nullptr;
+  dir_input.terms_mlp = -1;
+  exit_memo_limit = -1;
 }
 
 void RayPacket::reset() {

@@ -39,7 +39,9 @@ struct RayState {
   // Still marching: not stopped by the VRU and not past the box.
   bool live() const { return valid && !terminated && k < k_end; }
   // Back to a default-constructed ray, its vectors emptied but keeping
-  // their storage.
+  // their storage, except for the exit memo's crossings: no one reads them
+  // while exit_memo_limit is -1 (no ray's k_end), and Ftu::run clears them
+  // before it uses them.
   void reset();
 };
 
