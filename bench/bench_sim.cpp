@@ -13,10 +13,14 @@
 //   bench_sim --benchmark_filter='BM_Simulate/frame:[0-3]/threads:1|BM_Simulate/frame:0/threads:2|BM_Reference'
 //   bench_sim --benchmark_filter=MemorySystem
 //   bench_sim --benchmark_filter='BM_SimulateVsReference/frame:0'   # nine lego pairs, median ratio
+//   bench_sim --benchmark_filter='BM_TwoThreadsVsOne|BM_CoreRoundTrip'  # two threads' speed-up, core round trips
 // Last figures (wall s, noisy host; docs/simulator.md "Host speed"): on an
-// AVX2-only AMD EPYC, lego one thread median 1.56 (least 1.49) against the
-// reference renderer's median 1.55, median ratio 1.02 over ten rounds (1.04
-// the round before); on an
+// AVX2-only AMD EPYC, lego one thread median 1.46 against the reference
+// renderer's 1.45 (BM_SimulateVsReference median ratio 0.98 to 1.01), two
+// threads 1.02 (BM_TwoThreadsVsOne median 1.45x) while the host kept the
+// two vCPUs near each other (core round trip below 150 ns), about 1.0x one
+// thread when not (round trip near 350 ns); the round before, one thread
+// median 1.56 against 1.55 (ratio 1.02); on an
 // AVX-512 machine before that, lego one thread least 1.20, median 1.32,
 // against 1.13 and 1.20 (median ratio 1.09), two threads about 0.89-0.93
 // when the host leaves both cores; mic one thread about 1.0x the reference.
@@ -24,11 +28,13 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <map>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "data/dataset.h"
@@ -100,6 +106,37 @@ const Workload* frame_of(benchmark::State& state) {
   return &w;
 }
 
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// The time, in ns, for a cache line to go from this thread to another and
+// back: `trips` handovers of one atomic counter between two threads. Two
+// threads of the simulator exchange results through such lines, so their
+// speed-up over one depends on it (on a shared host it changes from minute
+// to minute as the host moves the two vCPUs between cores).
+double core_round_trip_ns(int trips) {
+  alignas(64) std::atomic<int64_t> line{0};
+  std::thread other([&] {
+    for (int64_t i = 0; i < trips; ++i) {
+      while (line.load(std::memory_order_acquire) != 2 * i + 1) {
+      }
+      line.store(2 * i + 2, std::memory_order_release);
+    }
+  });
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int64_t i = 0; i < trips; ++i) {
+    line.store(2 * i + 1, std::memory_order_release);
+    while (line.load(std::memory_order_acquire) != 2 * i + 2) {
+    }
+  }
+  const auto t1 = std::chrono::steady_clock::now();
+  other.join();
+  return std::chrono::duration<double, std::nano>(t1 - t0).count() / trips;
+}
+
 // args: frame, threads. Counters: simulated cycles per host second, cycles and
 // samples of the frame.
 void BM_Simulate(benchmark::State& state) {
@@ -161,11 +198,6 @@ void BM_SimulateVsReference(benchmark::State& state) {
     ref_s.push_back(std::chrono::duration<double>(t2 - t1).count());
     ratios.push_back(sim_s.back() / ref_s.back());
   }
-  auto median = [](std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    const size_t n = v.size();
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-  };
   state.counters["ratio_median"] = median(ratios);
   state.counters["ratio_min"] = *std::min_element(ratios.begin(), ratios.end());
   state.counters["ratio_max"] = *std::max_element(ratios.begin(), ratios.end());
@@ -178,6 +210,53 @@ BENCHMARK(BM_SimulateVsReference)
     ->Iterations(9)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
+
+// The simulator on two threads against one, as pairs back to back (one
+// thread, then two), each pair followed by a core round trip
+// (core_round_trip_ns). Counters: the median speed-up of the pairs, that of
+// the pairs whose round trips before and after stayed below 150 ns (the
+// two vCPUs near each other), and the median round trip.
+void BM_TwoThreadsVsOne(benchmark::State& state) {
+  const Workload* wp = frame_of(state);
+  if (!wp) return;
+  const Workload& w = *wp;
+  sim::SimOptions one, two;
+  two.threads = 2;
+  std::vector<double> speedups, near_speedups, trips;
+  using Clock = std::chrono::steady_clock;
+  double before = core_round_trip_ns(20000);
+  for (auto _ : state) {
+    const Clock::time_point t0 = Clock::now();
+    benchmark::DoNotOptimize(sim::simulate_chip(*w.model, w.camera, preset(), one));
+    const Clock::time_point t1 = Clock::now();
+    benchmark::DoNotOptimize(sim::simulate_chip(*w.model, w.camera, preset(), two));
+    const Clock::time_point t2 = Clock::now();
+    const double after = core_round_trip_ns(20000);
+    const double speedup =
+        std::chrono::duration<double>(t1 - t0).count() / std::chrono::duration<double>(t2 - t1).count();
+    speedups.push_back(speedup);
+    if (std::max(before, after) < 150.0) near_speedups.push_back(speedup);
+    trips.push_back(after);
+    before = after;
+  }
+  state.counters["speedup_median"] = median(speedups);
+  state.counters["speedup_min"] = *std::min_element(speedups.begin(), speedups.end());
+  state.counters["speedup_max"] = *std::max_element(speedups.begin(), speedups.end());
+  state.counters["near_pairs"] = double(near_speedups.size());
+  if (!near_speedups.empty()) state.counters["near_speedup_median"] = median(near_speedups);
+  state.counters["round_trip_ns_median"] = median(trips);
+}
+BENCHMARK(BM_TwoThreadsVsOne)->ArgNames({"frame"})->Arg(0)->Iterations(9)->Unit(benchmark::kSecond)->UseRealTime();
+
+// The core round trip alone (see core_round_trip_ns), 20000 trips a time.
+void BM_CoreRoundTrip(benchmark::State& state) {
+  std::vector<double> trips;
+  for (auto _ : state) trips.push_back(core_round_trip_ns(20000));
+  state.counters["round_trip_ns_median"] = median(trips);
+  state.counters["round_trip_ns_min"] = *std::min_element(trips.begin(), trips.end());
+  state.counters["round_trip_ns_max"] = *std::max_element(trips.begin(), trips.end());
+}
+BENCHMARK(BM_CoreRoundTrip)->Iterations(50)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The DRAM model behind the clock crossing, per core cycle: idle, and with a
 // 1000-byte feature block read started every 200 core cycles.
