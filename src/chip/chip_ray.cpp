@@ -23,14 +23,16 @@ int64_t first_true(int64_t lo, int64_t hi, Pred pred) {
   return lo;
 }
 
-// The number of predicate evaluations first_true(lo, hi, pred) makes when
-// its answer is `e`: the bisection's path follows from e alone (pred(k) is
-// k >= e on a monotone predicate), so it is replayed without evaluating. On
-// n = hi - lo candidates, the answer's offset j = e - lo in [0, n], a step
-// keeps the n / 2 (rounded down) below the midpoint when j <= n / 2, else
-// the rest above it. With n + 1 a power of two every path takes log2(n + 1)
-// more steps; with n a power of two 2^b, every path takes b steps, one more
-// for j <= 1 (by induction: j <= n / 2 halves n, j > n / 2 leaves n / 2 - 1).
+}  // namespace
+
+// The bisection's path follows from e alone (pred(k) is k >= e on a
+// monotone predicate), so it is replayed without evaluating. On n = hi - lo
+// candidates, the answer's offset j = e - lo in [0, n], a step keeps the
+// n / 2 (rounded down) below the midpoint when j <= n / 2, else the
+// n - n / 2 - 1 above it. With n + 1 a power of two every path takes
+// log2(n + 1) more steps; with n a power of two 2^b, every path takes b
+// steps, one more for j <= 1 (by induction: j <= n / 2 halves n, j > n / 2
+// leaves n / 2 - 1).
 uint64_t first_true_steps(int64_t lo, int64_t hi, int64_t e) {
   if (lo >= hi) return 0;
   uint64_t n = uint64_t(hi - lo);
@@ -46,6 +48,8 @@ uint64_t first_true_steps(int64_t lo, int64_t hi, int64_t e) {
   }
   return steps + uint64_t(std::bit_width(n));  // n = 2^b - 1: b more steps
 }
+
+namespace {
 
 // A search's first guess ceil(y) as an integer, clamped to +-2^62 (far past
 // any candidate range), or kNoGuess for a y that is not finite. Clamping it

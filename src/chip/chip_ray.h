@@ -41,6 +41,12 @@ struct KInterval {
 // Candidate indices never exceed this (about 4 million steps).
 inline constexpr int64_t kMaxCandidate = int64_t(1) << 22;
 
+// The number of predicate evaluations a bisection for the first k in
+// [lo, hi) whose monotone predicate holds (midpoint lo + (hi - lo) / 2, the
+// upper half kept when it fails) makes when its answer is e (hi: none
+// holds).
+uint64_t first_true_steps(int64_t lo, int64_t hi, int64_t e);
+
 class RayMath {
  public:
   // fmt: the traversal float; step_micro > 0; micro_res: Rm.

@@ -2,6 +2,7 @@
 // bisection on each bound over [0, kMaxCandidate), as the hardware searches.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 
 #include "chip/chip_ray.h"
@@ -22,6 +23,34 @@ int64_t bisect(int64_t lo, int64_t hi, uint64_t& evals, Pred pred) {
       lo = mid + 1;
   }
   return lo;
+}
+
+// first_true_steps against the evaluations a bisection makes, for every
+// answer on every range of up to 1100 candidates, and at both ends and
+// random places of long ranges (offsets from lo, which must not matter).
+TEST(RayMathEvals, BisectionStepCountsMatchTheBisection) {
+  auto counted = [](int64_t lo, int64_t hi, int64_t e) {
+    uint64_t evals = 0;
+    const int64_t found = bisect(lo, hi, evals, [e](int64_t k) { return k >= e; });
+    EXPECT_EQ(found, std::clamp(e, lo, hi));
+    return evals;
+  };
+  for (int64_t n = 0; n <= 1100; ++n)
+    for (int64_t j = 0; j <= n; ++j) {
+      const int64_t lo = 37;
+      ASSERT_EQ(first_true_steps(lo, lo + n, lo + j), counted(lo, lo + n, lo + j)) << "n " << n << " j " << j;
+    }
+  std::mt19937_64 rng(5);
+  for (int i = 0; i < 20000; ++i) {
+    const int64_t lo = int64_t(rng() % 1000), n = 1 + int64_t(rng() % (uint64_t(1) << 22));
+    const int64_t pick = int64_t(rng() % 4);
+    const int64_t e = pick == 0 ? lo : pick == 1 ? lo + n : pick == 2 ? lo + 1 : lo + int64_t(rng() % uint64_t(n + 1));
+    ASSERT_EQ(first_true_steps(lo, lo + n, e), counted(lo, lo + n, e)) << "n " << n << " e - lo " << e - lo;
+  }
+  // Answers outside the range walk as its ends do.
+  EXPECT_EQ(first_true_steps(10, 20, 3), counted(10, 20, 10));
+  EXPECT_EQ(first_true_steps(10, 20, 99), counted(10, 20, 20));
+  EXPECT_EQ(first_true_steps(10, 10, 10), 0u);
 }
 
 KInterval bisected_box(const RayMath& m, const ChipRay& r, const Vec3d& lo, const Vec3d& hi, uint64_t& evals) {
