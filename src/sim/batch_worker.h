@@ -30,6 +30,11 @@
 
 namespace edrnr::sim {
 
+// What one thread writes and the other reads is kept off the cache lines the
+// other thread writes: a line written by both moves between the cores at
+// every write (tens to hundreds of nanoseconds each on a shared host).
+inline constexpr size_t kCacheLineBytes = 64;
+
 // An RP's batch from the FTU until its last sample leaves the VRU. The
 // arithmetic job (sample coordinates unless made, weighted sums, MLP,
 // compositing) reads block, cv_tag, samples and coords and writes coords and
@@ -142,9 +147,9 @@ class FrontEndAhead {
   chip::FrontEnd& front_;
   const chip::Vru& vru_;
   std::vector<FrontEndPacket> ring_;
-  std::atomic<uint64_t> produced_{0};
-  std::atomic<uint64_t> consumed_shared_{0};  // consumed_, as the producer sees it
-  uint64_t consumed_ = 0;                     // consumer's own count
+  alignas(kCacheLineBytes) std::atomic<uint64_t> produced_{0};         // the producer's
+  alignas(kCacheLineBytes) std::atomic<uint64_t> consumed_shared_{0};  // consumed_, as the producer sees it
+  uint64_t consumed_ = 0;                                              // consumer's own count
 };
 
 // One FTU run (Ftu::run of an RP in one CV) with what the timing shell needs
@@ -199,7 +204,7 @@ class FtuAhead {
 
  private:
   enum : uint8_t { kNone, kPending, kRunning, kDone };
-  struct Slot {
+  struct alignas(kCacheLineBytes) Slot {
     std::atomic<uint8_t> state{kNone};
     std::atomic<bool> queued{false};  // a job for this RP's run is queued and not started
     uint32_t cv_tag = 0;
@@ -262,13 +267,18 @@ class Worker {
   FtuAhead* ftu_ahead_;
   std::vector<uint32_t> queue_;      // batch jobs: RP pointers
   std::vector<uint32_t> ftu_queue_;  // FTU jobs: RP pointers
-  std::atomic<uint64_t> ftu_submitted_{0}, ftu_started_{0};
-  std::atomic<uint64_t> submitted_{0}, completed_{0};
+  // Written by the main thread.
+  alignas(kCacheLineBytes) std::atomic<uint64_t> submitted_{0};
+  std::atomic<uint64_t> ftu_submitted_{0};
   std::atomic<uint64_t> signals_{0};  // bumped by the main thread to wake the sleeping worker
-  std::atomic<bool> stop_{false}, worker_sleeping_{false}, main_sleeping_{false};
-  std::exception_ptr error_;  // written once by the worker, then failed_ set
+  std::atomic<bool> stop_{false}, main_sleeping_{false};
+  // Written by the worker.
+  alignas(kCacheLineBytes) std::atomic<uint64_t> completed_{0};
+  std::atomic<uint64_t> ftu_started_{0};
+  std::atomic<bool> worker_sleeping_{false};
   std::atomic<bool> failed_{false};
-  std::thread thread_;
+  std::exception_ptr error_;  // written once by the worker, then failed_ set
+  alignas(kCacheLineBytes) std::thread thread_;
 };
 
 }  // namespace edrnr::sim
