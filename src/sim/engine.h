@@ -96,10 +96,11 @@ class Engine {
   // OoO-SI: issues the oldest batch whose block is on chip to the CFIU. The
   // batch's work is done now; its timing follows.
   void step_issue();
-  // The batch's arithmetic starts as soon as it exists: it depends only on
-  // the samples, the model and its RP's rays, and the RP has no other batch
-  // in flight. The sample coordinates are computed here, for the CFIU's bank
-  // reads at issue.
+  // The batch's arithmetic starts as soon as it exists (unless the worker
+  // made it with the FTU run): it depends only on the samples, the model and
+  // its RP's rays, and the RP has no other batch in flight. The sample
+  // coordinates are computed here when the CFIU's bank reads at issue need
+  // them; with two threads the TME's MLP loads are counted here.
   void start_batch(uint32_t rp, uint32_t slot);
   // The CFIU reads the corners of each sample from the banks now; bank
   // conflicts lengthen its samples.
