@@ -132,7 +132,7 @@ void BatchArithmetic::flush() {
     for (size_t j = g0; j < g1; ++j) {
       const Deferred& d = deferred_[order_[j]];
       finish(*d.packet, *d.flight, s);
-      s += d.flight->coords.size();
+      s += d.flight->samples.size();
       d.flight->deferred = false;
     }
     g0 = g1;
