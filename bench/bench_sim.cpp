@@ -112,6 +112,13 @@ double median(std::vector<double> v) {
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
+// Counters name_median, name_min and name_max of the values v (not empty).
+void spread_counters(benchmark::State& state, const std::string& name, const std::vector<double>& v) {
+  state.counters[name + "_median"] = median(v);
+  state.counters[name + "_min"] = *std::min_element(v.begin(), v.end());
+  state.counters[name + "_max"] = *std::max_element(v.begin(), v.end());
+}
+
 // The time, in ns, for a cache line to go from this thread to another and
 // back: `trips` handovers of one atomic counter between two threads. Two
 // threads of the simulator exchange results through such lines, so their
@@ -198,9 +205,7 @@ void BM_SimulateVsReference(benchmark::State& state) {
     ref_s.push_back(std::chrono::duration<double>(t2 - t1).count());
     ratios.push_back(sim_s.back() / ref_s.back());
   }
-  state.counters["ratio_median"] = median(ratios);
-  state.counters["ratio_min"] = *std::min_element(ratios.begin(), ratios.end());
-  state.counters["ratio_max"] = *std::max_element(ratios.begin(), ratios.end());
+  spread_counters(state, "ratio", ratios);
   state.counters["sim_s_median"] = median(sim_s);
   state.counters["reference_s_median"] = median(ref_s);
 }
@@ -239,9 +244,7 @@ void BM_TwoThreadsVsOne(benchmark::State& state) {
     trips.push_back(after);
     before = after;
   }
-  state.counters["speedup_median"] = median(speedups);
-  state.counters["speedup_min"] = *std::min_element(speedups.begin(), speedups.end());
-  state.counters["speedup_max"] = *std::max_element(speedups.begin(), speedups.end());
+  spread_counters(state, "speedup", speedups);
   state.counters["near_pairs"] = double(near_speedups.size());
   if (!near_speedups.empty()) state.counters["near_speedup_median"] = median(near_speedups);
   state.counters["round_trip_ns_median"] = median(trips);
@@ -252,9 +255,7 @@ BENCHMARK(BM_TwoThreadsVsOne)->ArgNames({"frame"})->Arg(0)->Iterations(9)->Unit(
 void BM_CoreRoundTrip(benchmark::State& state) {
   std::vector<double> trips;
   for (auto _ : state) trips.push_back(core_round_trip_ns(20000));
-  state.counters["round_trip_ns_median"] = median(trips);
-  state.counters["round_trip_ns_min"] = *std::min_element(trips.begin(), trips.end());
-  state.counters["round_trip_ns_max"] = *std::max_element(trips.begin(), trips.end());
+  spread_counters(state, "round_trip_ns", trips);
 }
 BENCHMARK(BM_CoreRoundTrip)->Iterations(50)->Unit(benchmark::kMillisecond)->UseRealTime();
 
