@@ -222,6 +222,7 @@ const std::map<std::string, Field>& fields() {
           return fmt::format("[{}, {}, {}]", c.background[0], c.background[1], c.background[2]);
         }}},
       {"random_background", scalar(&TrainConfig::random_background)},
+      {"pixel_jitter", scalar(&TrainConfig::pixel_jitter)},
       {"iters", scalar(&TrainConfig::iters)},
       {"minutes", scalar(&TrainConfig::minutes)},
       {"plan_step", scalar(&TrainConfig::plan_step)},

@@ -26,6 +26,7 @@ struct TrainConfig {
   float transmittance_min = 1e-4f;                             // early termination (as the renderer)
   float background[3] = {1.f, 1.f, 1.f};  // the background the model is exported for (and evaluated on)
   bool random_background = true;          // with RGBA images: composite each ray's target on a random colour
+  bool pixel_jitter = false;              // training rays through a random point of their pixel, not its centre
 
   // --- schedule ---
   int64_t iters = 20000;          // total steps

@@ -113,12 +113,17 @@ void Trainer::State::sample_training_rays(Batch& b, int n) {
     const Frame& fr = data.frames[f];
     const uint64_t local = px - pixel_start[f];
     const int x = int(local % uint64_t(fr.image.width)), y = int(local / uint64_t(fr.image.width));
-    set_ray(b, i, fr.camera.pixel_ray(x, y));
+    const uint64_t h = mix64(hash_combine(base, uint64_t(i)));
+    if (cfg.pixel_jitter)  // a point of the pixel's square, drawn apart from the background's colour
+      set_ray(b, i,
+              fr.camera.ray_at(double(x) + double(uniform01(hash_combine(h, 3))),
+                               double(y) + double(uniform01(hash_combine(h, 4)))));
+    else
+      set_ray(b, i, fr.camera.pixel_ray(x, y));
     const float* t = fr.image.at(x, y);
     float* bg = &b.background[3 * size_t(i)];
     if (rgba) {
       // Premultiplied: target = rgb a + (1 - a) bg.
-      const uint64_t h = mix64(hash_combine(base, uint64_t(i)));
       for (int c = 0; c < 3; ++c)
         bg[c] = cfg.random_background ? uniform01(hash_combine(h, uint64_t(c))) : cfg.background[c];
       for (int c = 0; c < 3; ++c) b.target[3 * size_t(i) + size_t(c)] = t[c] + (1.f - t[3]) * bg[c];

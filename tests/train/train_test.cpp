@@ -223,6 +223,7 @@ TEST(Train, RegularisersActAndKeepTheResultIndependentOfThreads) {
   reg.distortion_weight = 0.01f;
   reg.mlp_tie_weight = 1e-3f;
   reg.mlp_equalize = 0.f;  // the tie and the equalization exclude each other
+  reg.pixel_jitter = true;
   TrainOptions one, two;
   one.threads = 1;
   two.threads = 2;
@@ -233,12 +234,14 @@ TEST(Train, RegularisersActAndKeepTheResultIndependentOfThreads) {
   EXPECT_EQ(model_bytes(a, true), model_bytes(b, true));
   EXPECT_NE(model_bytes(a, true), model_bytes(plain, true));
   // The terms that act after the freeze only (the others have gradient tests
-  // in kernels_test.cpp) each change the result alone.
-  for (int term = 0; term < 3; ++term) {
+  // in kernels_test.cpp) and the rays' jitter in their pixels each change
+  // the result alone.
+  for (int term = 0; term < 4; ++term) {
     TrainConfig c = short_config();
     if (term == 0) c.block_tv_weight = 1e-5f;
     if (term == 1) c.mlp_tie_weight = 1e-3f, c.mlp_equalize = 0.f;
     if (term == 2) c.block_smooth_weight = 0.5f;
+    if (term == 3) c.pixel_jitter = true;
     Trainer t(data, c);
     ASSERT_TRUE(t.run(two));
     EXPECT_NE(model_bytes(t, false), model_bytes(plain, false)) << "term " << term;
