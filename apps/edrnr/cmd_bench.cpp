@@ -34,7 +34,7 @@ namespace {
 struct BenchOptions {
   std::string model, dataset, split = "test", views = "0,8,16", engine = "fast", vs;
   int frames = 5, warmup = 1, width = 800, threads = 0;
-  float step = 1.f;
+  float step = kDefaultStepMicro;
   float fast_transmittance = RenderSettings().fast_transmittance_min;
   std::string form = "auto";
   CLI::Option* dataset_opt = nullptr;
@@ -134,7 +134,7 @@ void run_bench_render(const BenchOptions& o) {
       cams.push_back({fmt::format("orbit {} deg", 15 * v), orbit_camera(o.width, o.width, 15.0 * v, 30, 4, 40)});
   }
   const SceneModel model = load_model(o.model);
-  check_step_micro(o.step, model.micro_res, "--step");
+  check_step_micro(o.step, model, "--step");
 
   // The fast engines keep their packed model across frames; the others go through the engine table.
   std::unique_ptr<FastRenderer> fast;

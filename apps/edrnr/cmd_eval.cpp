@@ -32,7 +32,7 @@ struct EvalOptions {
   std::string model, dataset, split = "test";
   std::string views, json_path, save_dir;
   int limit = 0, downscale = 1;
-  float step = 1.f;
+  float step = kDefaultStepMicro;
   float fast_transmittance = RenderSettings().fast_transmittance_min;
   std::string form = "auto", background = "white", engine = "reference";
   int threads = 0;
@@ -112,7 +112,7 @@ void run_eval(const EvalOptions& o) {
          first.height, o.downscale > 1 ? fmt::format(" after --downscale {}", o.downscale) : "", kSsimWindowPixels,
          kSsimWindowPixels);
   const SceneModel model = load_model(o.model);
-  check_step_micro(o.step, model.micro_res, "--step");
+  check_step_micro(o.step, model, "--step");
   if (!o.save_dir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(o.save_dir, ec);

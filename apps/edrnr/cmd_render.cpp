@@ -32,7 +32,7 @@ struct RenderOptions {
   int view = 0;
   double orbit = 0, elevation = 30, radius = 4, fov = 40;
   int width = 0, height = 0;
-  float step = 1.f;
+  float step = kDefaultStepMicro;
   float fast_transmittance = RenderSettings().fast_transmittance_min;
   std::string form = "auto", background = "white", engine = "reference";
   int threads = 0;
@@ -122,7 +122,7 @@ void run_turntable(const RenderOptions& o, const Engine& engine, const RenderSet
   int w, h;
   pick_size(o, 800, 800, w, h);
   const SceneModel model = load_model(o.model);
-  check_step_micro(o.step, model.micro_res, "--step");
+  check_step_micro(o.step, model, "--step");
   const auto t0 = std::chrono::steady_clock::now();
   uint64_t samples = 0;
   for (int i = 0; i < o.turntable; ++i) {
@@ -165,7 +165,7 @@ void run_render(const RenderOptions& o) {
   check_output_path(o.output, "-o");
   const Camera cam = pick_camera(o);
   const SceneModel model = load_model(o.model);
-  check_step_micro(o.step, model.micro_res, "--step");
+  check_step_micro(o.step, model, "--step");
 
   RenderStats stats;
   const auto t0 = std::chrono::steady_clock::now();

@@ -189,7 +189,7 @@ void run_simulate(const SimulateOptions& o) {
   sim::validate(cfg);
   const View view = pick_view(o, cfg.chip);
   const SceneModel model = load_model(o.model);
-  check_step_micro(cfg.chip.step_micro, model.micro_res, "chip config render.step_micro");
+  check_step_micro(cfg.chip.step_micro, model, "chip config render.step_micro");
   // Table I's SRAM budget: a preset whose buffers do not fit is refused
   // before any simulation, unless the user asks to go over (the report says so).
   const sim::SramBudget budget = sim::sram_budget_for(model, cfg);

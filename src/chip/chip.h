@@ -74,7 +74,7 @@ struct ChipConfig {
   int64_t mlp_cache_bytes = 8448;          // 8.25 KB: one MLP
   int64_t micro_grid_cache_bytes = 8192;   // 8 KB of 64-bit fine-voxel words
   int functional_fill_latency_issues = 8;  // functional stand-in for the DRAM latency
-  float step_micro = 1.0f;                 // candidate spacing in micro-voxel edges
+  float step_micro = kDefaultStepMicro;    // candidate spacing in micro-voxel edges
   float transmittance_min = 1e-4f;         // early termination threshold
   float background[3] = {1.f, 1.f, 1.f};
   ChipSwitches switches;

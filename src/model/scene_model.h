@@ -28,9 +28,9 @@ namespace edrnr {
 enum class Tier : int { Coarse = 0, Fine = 1, Leaf = 2, Micro = 3 };
 inline constexpr int kTierCount = 4;
 inline constexpr int kBlockVertsPerAxis = 5;
-inline constexpr int kBlockVerts = 125;  // 5^3 vertices per fine voxel block
-inline constexpr int kMicroPerFine = 4;  // micro voxels per fine voxel, per axis
-inline constexpr int kFinePerCoarse = 8;  // fine voxels per CV, per axis
+inline constexpr int kBlockVerts = 125;         // 5^3 vertices per fine voxel block
+inline constexpr int kMicroPerFine = 4;         // micro voxels per fine voxel, per axis
+inline constexpr int kFinePerCoarse = 8;        // fine voxels per CV, per axis
 inline constexpr size_t kMlpCacheBytes = 8448;  // the chip's 8.25 KB MLP cache
 
 const char* tier_name(Tier t);
@@ -47,8 +47,10 @@ class Bitmap3 {
   bool get(size_t i) const { return (words_[i >> 6] >> (i & 63)) & 1u; }
   bool get(int x, int y, int z) const { return get(index(x, y, z)); }
   void set(size_t i, bool v = true) {
-    if (v) words_[i >> 6] |= uint64_t(1) << (i & 63);
-    else words_[i >> 6] &= ~(uint64_t(1) << (i & 63));
+    if (v)
+      words_[i >> 6] |= uint64_t(1) << (i & 63);
+    else
+      words_[i >> 6] &= ~(uint64_t(1) << (i & 63));
   }
   void set(int x, int y, int z, bool v = true) { set(index(x, y, z), v); }
   size_t count() const;
@@ -114,24 +116,30 @@ struct MlpQ {
   bool operator==(const MlpQ& o) const = default;
 };
 
+// The spacing of candidate samples along a ray, in micro-voxel edges, that
+// the trainer, the renderers and the chip use unless told otherwise: half a
+// micro voxel (about 1 dB over one on validation views, docs/training.md,
+// "The sample step").
+inline constexpr float kDefaultStepMicro = 0.5f;
+
 struct SceneModel {
   Box3f scene_box{{-1.5f, -1.5f, -1.5f}, {1.5f, 1.5f, 1.5f}};
   Box3f object_aabb{{-1.5f, -1.5f, -1.5f}, {1.5f, 1.5f, 1.5f}};
-  int micro_res = 256;  // Rm, a multiple of 32
+  int micro_res = 256;                        // Rm, a multiple of 32
   std::array<Bitmap3, kTierCount> occupancy;  // indexed by Tier
 
-  int feature_channels = 16;                // F
-  std::vector<uint32_t> block_fine_index;   // linear fine index of each block, strictly ascending
-  std::vector<float> features_f32;          // blocks * 125 * F, or empty
-  std::vector<uint8_t> features_q4;         // blocks * 125 * F / 2, low nibble = even channel, or empty
-  FeatureQuant feature_quant;               // present when features_q4 is
+  int feature_channels = 16;               // F
+  std::vector<uint32_t> block_fine_index;  // linear fine index of each block, strictly ascending
+  std::vector<float> features_f32;         // blocks * 125 * F, or empty
+  std::vector<uint8_t> features_q4;        // blocks * 125 * F / 2, low nibble = even channel, or empty
+  FeatureQuant feature_quant;              // present when features_q4 is
 
   MlpArch mlp_arch;
-  std::vector<uint32_t> mlp_coarse_index;   // linear CV index of each MLP, strictly ascending
-  std::vector<MlpF> mlps_f32;               // one per CV in mlp_coarse_index, or empty
-  std::vector<MlpQ> mlps_q8;                // one per CV in mlp_coarse_index, or empty
+  std::vector<uint32_t> mlp_coarse_index;  // linear CV index of each MLP, strictly ascending
+  std::vector<MlpF> mlps_f32;              // one per CV in mlp_coarse_index, or empty
+  std::vector<MlpQ> mlps_q8;               // one per CV in mlp_coarse_index, or empty
 
-  std::string metadata_json = "{}";         // source dataset, training settings, ...
+  std::string metadata_json = "{}";  // source dataset, training settings, ...
 
   // Lookups built by finalize(): -1 where there is no block / MLP.
   std::vector<int32_t> fine_to_block;

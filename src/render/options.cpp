@@ -1,7 +1,11 @@
 #include "render/options.h"
 
+#include <fmt/format.h>
+
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
+#include <nlohmann/json.hpp>
 #include <vector>
 
 #include "core/error.h"
@@ -81,6 +85,25 @@ void check_step_micro(double step_micro, int micro_res, const std::string& what)
         "{} {:.6g}: up to {:.3g} samples per ray at micro resolution {}, over the limit of {} (the smallest step "
         "here is {:.3g})",
         what, step_micro, samples, micro_res, limits::kMaxSamplesPerRay, diagonal / double(limits::kMaxSamplesPerRay));
+}
+
+double trained_step_micro(const SceneModel& model) {
+  const auto meta = nlohmann::json::parse(model.metadata_json, nullptr, false);
+  if (!meta.is_object()) return 0.0;
+  const auto it = meta.find("step_micro");
+  if (it == meta.end() || !it->is_number()) return 0.0;
+  const double step = it->get<double>();
+  return step > 0.0 && std::isfinite(step) ? step : 0.0;
+}
+
+void check_step_micro(double step_micro, const SceneModel& model, const std::string& what) {
+  check_step_micro(step_micro, model.micro_res, what);
+  const double trained = trained_step_micro(model);
+  if (trained > 0.0 && float(trained) != float(step_micro))
+    fmt::print(stderr,
+               "edrnr: warning: {} {:.6g} micro voxels, but the model was trained at {:.6g}: it renders best at "
+               "its training step\n",
+               what, step_micro, trained);
 }
 
 }  // namespace edrnr

@@ -25,4 +25,13 @@ Vec3f parse_vec3(const std::string& text, const std::string& flag);
 // smallest step allowed.
 void check_step_micro(double step_micro, int micro_res, const std::string& what);
 
+// The same checks for a loaded model, and a warning on stderr when the model
+// records (metadata "step_micro", written by the trainer) another step than
+// the one about to be used: a model renders best at the step it was trained
+// at (docs/training.md, "The sample step").
+void check_step_micro(double step_micro, const SceneModel& model, const std::string& what);
+
+// The step recorded in a model's metadata, or 0 when it records none.
+double trained_step_micro(const SceneModel& model);
+
 }  // namespace edrnr

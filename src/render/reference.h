@@ -28,8 +28,8 @@ namespace edrnr {
 enum class ModelForm { Auto, Float, Quantized };  // Auto: quantized if the model has it
 
 struct RenderSettings {
-  float step_micro = 1.0f;          // delta in micro-voxel edge lengths
-  float transmittance_min = 1e-4f;  // early termination threshold
+  float step_micro = kDefaultStepMicro;  // delta in micro-voxel edge lengths
+  float transmittance_min = 1e-4f;       // early termination threshold
   float background[3] = {1.f, 1.f, 1.f};
   ModelForm form = ModelForm::Auto;
   bool use_occupancy_tiers = true;  // false: test every candidate (a slow check of the skipping)

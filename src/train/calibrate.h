@@ -19,11 +19,11 @@
 namespace edrnr::train {
 
 struct CalibrationSettings {
-  float step_micro = 1.f;           // the renderer's sample spacing (micro voxels)
-  float transmittance_min = 1e-4f;  // samples past this transmittance are not evaluated (as the renderer)
-  int activation_bits = 8;          // the chip's activations: [-2^(b-1), 2^(b-1) - 1] steps
-  int64_t target_rays = 1 << 18;    // about this many rays, every stride-th pixel of every camera
-  int threads = 0;                  // 0: all cores
+  float step_micro = kDefaultStepMicro;  // the renderer's sample spacing (micro voxels)
+  float transmittance_min = 1e-4f;       // samples past this transmittance are not evaluated (as the renderer)
+  int activation_bits = 8;               // the chip's activations: [-2^(b-1), 2^(b-1) - 1] steps
+  int64_t target_rays = 1 << 18;         // about this many rays, every stride-th pixel of every camera
+  int threads = 0;                       // 0: all cores
 };
 
 struct CalibrationReport {

@@ -22,7 +22,7 @@ struct TrainConfig {
   int geo_features = 8;                                        // density net outputs (G)
   std::vector<int> color_hidden{16};                           // colour net hidden widths
   int dir_frequencies = 2;                                     // L
-  float step_micro = 1.f;                                      // sample spacing in micro voxels (as the renderer)
+  float step_micro = kDefaultStepMicro;                        // sample spacing in micro voxels (as the renderer)
   float transmittance_min = 1e-4f;                             // early termination (as the renderer)
   float background[3] = {1.f, 1.f, 1.f};  // the background the model is exported for (and evaluated on)
   bool random_background = true;          // with RGBA images: composite each ray's target on a random colour

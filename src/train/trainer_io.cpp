@@ -111,6 +111,7 @@ SceneModel Trainer::State::make_model(bool quantized) const {
   meta["iters"] = iters;
   meta["seed"] = cfg.seed;
   meta["levels"] = cfg.levels;
+  meta["step_micro"] = cfg.step_micro;  // the sample spacing it was trained at (micro voxels)
   meta["train_psnr_float_db"] = std::round(psnr_float * 100) / 100;
   if (quantized) meta["train_psnr_quantized_db"] = std::round(psnr_quantized * 100) / 100;
   m.metadata_json = meta.dump();

@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "core/limits.h"
+#include "model/scene_model.h"
 #include "render/options.h"
 
 namespace edrnr {
@@ -38,6 +39,25 @@ TEST(RenderOptions, StepLimits) {
   const double smallest = std::sqrt(3.0) * 256 / double(limits::kMaxSamplesPerRay);
   EXPECT_EQ(error_of(smallest * 1.001, 256), "");
   EXPECT_NE(error_of(smallest * 0.99, 256), "");
+}
+
+// The trainer records its step in the model's metadata; the renderers read it
+// back to warn when they would sample at another one.
+TEST(RenderOptions, TrainedStepIsReadFromTheMetadata) {
+  SceneModel m;
+  EXPECT_EQ(trained_step_micro(m), 0.0);  // "{}": none recorded
+  m.metadata_json = R"({"producer": "edrnr train", "step_micro": 0.5})";
+  EXPECT_EQ(trained_step_micro(m), 0.5);
+  m.metadata_json = R"({"step_micro": 2})";
+  EXPECT_EQ(trained_step_micro(m), 2.0);
+  for (const char* bad : {R"({"step_micro": "0.5"})", R"({"step_micro": -1})", R"([0.5])", "not json"}) {
+    m.metadata_json = bad;
+    EXPECT_EQ(trained_step_micro(m), 0.0) << bad;
+  }
+  m.metadata_json = R"({"step_micro": 0.5})";
+  m.micro_res = 32;
+  EXPECT_NO_THROW(check_step_micro(1.0, m, "--step"));  // a warning, not an error
+  EXPECT_THROW(check_step_micro(1e-9, m, "--step"), Error);
 }
 
 }  // namespace

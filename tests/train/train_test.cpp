@@ -13,6 +13,7 @@
 #include "data/dataset.h"
 #include "model/model_io.h"
 #include "model/procedural.h"
+#include "render/options.h"
 #include "render/reference.h"
 #include "temp_dir.h"
 #include "train/calibrate.h"
@@ -280,6 +281,7 @@ TEST(Train, EqualizedMlpsRenderWhatTheMlpsRenderedBefore) {
   const Dataset test = load("test");
   TrainConfig c = short_config();
   c.prune_weight = 0.f;
+  c.prune_part_fraction = 0.f;
   c.mlp_equalize = 1.f;
   Trainer t(data, c);
   TrainOptions o;
@@ -311,6 +313,8 @@ TEST(Train, ActivationCalibrationDoesNotDependOnTheStepItStartsFrom) {
   std::vector<Camera> cameras;
   for (const auto& f : data.frames) cameras.push_back(f.camera);
   ASSERT_NE(t.quantized.metadata_json.find("activation_calibration"), std::string::npos);
+  EXPECT_EQ(trained_step_micro(t.quantized), double(small_config().step_micro));  // the step it was trained at
+  EXPECT_EQ(trained_step_micro(t.float_model), double(small_config().step_micro));
   SceneModel coarse = t.quantized;
   for (auto& q : coarse.mlps_q8)
     for (auto* net : {&q.density, &q.color})
@@ -379,6 +383,7 @@ TEST(Train, CoarseVoxelPruningDropsWholeCoarseVoxelsAndTheirMlps) {
   const Dataset data = load("train");
   auto train = [&](float threshold) {
     TrainConfig c = short_config();
+    c.step_micro = 1.f;  // the weights above are those of samples one micro voxel apart (finer samples weigh less)
     c.prune_cv_weight = threshold;
     Trainer t(data, c);
     EXPECT_TRUE(t.run({}));
