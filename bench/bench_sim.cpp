@@ -5,7 +5,7 @@
 //         `edrnr make-scene several`), orbit camera, 800x800 (and 200x200)
 // Each frame is simulated with simulate_chip on one and two threads, and
 // rendered by the reference renderer on one thread (`edrnr render --engine
-// reference --threads 1`: step 1, white background), so the ratio of the two
+// reference --threads 1`: the default step, white background), so the ratio of the two
 // comes from one run. Models are loaded before the clock starts. Also the
 // memory system's cost per core cycle.
 //
