@@ -259,7 +259,10 @@ FtuRun& FtuAhead::take(uint32_t rp, uint32_t cv_tag, Ftu& ftu) {
   } else if (expected == kNone) {
     throw std::logic_error(fmt::format("cycle simulator: RP {} scheduled with no FTU run pending", rp));
   } else {
-    // The worker is making it: a run takes microseconds.
+    // The worker is making it (a run takes microseconds): make other pending
+    // runs meanwhile, then spin.
+    while (s.state.load(std::memory_order_acquire) != kDone && run_any_pending(ftu)) {
+    }
     spin_until([&] { return s.state.load(std::memory_order_acquire) == kDone; }, std::chrono::hours(1));
   }
   s.state.store(kNone, std::memory_order_relaxed);
@@ -279,8 +282,10 @@ Worker::Worker(BatchArithmetic& arithmetic, RpBuffer& buffer, std::vector<Flight
       flights_(flights),
       ahead_(ahead),
       ftu_ahead_(ftu_ahead),
-      queue_(capacity),
-      ftu_queue_(capacity) {
+      queue_(2 * capacity),
+      ftu_queue_(capacity),
+      claimed_(new std::atomic<bool>[capacity]) {
+  for (size_t i = 0; i < capacity; ++i) claimed_[i].store(true, std::memory_order_relaxed);
   thread_ = std::thread([this] { loop(); });
 }
 
@@ -299,21 +304,32 @@ void Worker::signal() {
   signals_.notify_one();
 }
 
-// Each queue holds at most one job per RP in flight: the engine waits for an
-// RP's arithmetic job before the RP moves on, and FtuAhead::needs_job keeps
-// one FTU job per RP. A full queue is a logic error, not a wait.
+// FtuAhead::needs_job keeps one FTU job per RP queued: a full FTU queue is
+// a logic error. The batch queue holds one job per RP in flight (the engine
+// waits for an RP's arithmetic job before the RP moves on) and the entries
+// of jobs the engine made itself until the worker passes them: when full,
+// the engine waits for the worker to take one.
 uint64_t Worker::push(std::vector<uint32_t>& queue, std::atomic<uint64_t>& submitted,
                       const std::atomic<uint64_t>& taken, uint32_t rp, const char* what) {
   const uint64_t seq = submitted.load();
-  if (seq - taken.load() >= queue.size())
-    throw std::logic_error(fmt::format("cycle simulator: more than {} {} jobs queued", queue.size(), what));
+  if (seq - taken.load() >= queue.size()) {
+    if (&queue != &queue_)
+      throw std::logic_error(fmt::format("cycle simulator: more than {} {} jobs queued", queue.size(), what));
+    main_wait(taken, seq - queue.size());
+    rethrow_failure();
+  }
   queue[seq % queue.size()] = rp;
   submitted.store(seq + 1);
   signal();
   return seq;
 }
 
-uint64_t Worker::submit(uint32_t rp) { return push(queue_, submitted_, completed_, rp, "batch"); }
+uint64_t Worker::submit(uint32_t rp) {
+  // Released: the worker that claims it sees the flight, even from an
+  // older queue entry of rp whose job the engine made.
+  claimed_[rp].store(false);
+  return push(queue_, submitted_, completed_, rp, "batch");
+}
 
 void Worker::submit_ftu(uint32_t rp) { push(ftu_queue_, ftu_submitted_, ftu_started_, rp, "FTU"); }
 
@@ -333,7 +349,21 @@ void Worker::rethrow_failure() const {
   if (failed_.load(std::memory_order_acquire)) std::rethrow_exception(error_);
 }
 
-void Worker::wait(uint64_t seq, Ftu* ftu) {
+bool Worker::pend_next_run(uint32_t rp) {
+  if (!ftu_ahead_ || !flights_[rp].stay) return false;
+  ftu_ahead_->pend(rp, flights_[rp].cv_tag);
+  return true;
+}
+
+void Worker::wait(uint64_t seq, uint32_t rp, BatchArithmetic* own, Ftu* ftu) {
+  // A job the worker has not claimed is made here rather than waited for
+  // (the worker is busy with work queued before it, or made ahead).
+  if (own && completed_.load() <= seq && !claimed_[rp].exchange(true)) {
+    rethrow_failure();
+    own->run(buffer_[rp], flights_[rp]);
+    if (pend_next_run(rp) && ftu_ahead_->needs_job(rp)) submit_ftu(rp);
+    return;
+  }
   if (ftu && ftu_ahead_)
     while (completed_.load() <= seq && ftu_ahead_->run_any_pending(*ftu)) {
     }
@@ -392,13 +422,9 @@ void Worker::loop() {
     const uint32_t rp = queue_[next % queue_.size()];
     bool next_run = false;
     try {
-      if (!error_) {
-        Flight& f = flights_[rp];
-        arithmetic_.run(buffer_[rp], f);
-        if (ftu_ahead_ && f.stay) {
-          ftu_ahead_->pend(rp, f.cv_tag);
-          next_run = true;
-        }
+      if (!error_ && !claimed_[rp].exchange(true)) {  // else the engine made it
+        arithmetic_.run(buffer_[rp], flights_[rp]);
+        next_run = pend_next_run(rp);
       }
     } catch (...) {
       fail_with(std::current_exception());

@@ -241,10 +241,13 @@ class Worker {
   uint64_t submit(uint32_t rp);
   // Queues a job for rp's pending FTU run (FtuAhead::pend, needs_job first).
   void submit_ftu(uint32_t rp);
-  // Waits until job `seq` is done (its results are then visible). Rethrows
-  // an exception a job threw. With `ftu` (the engine's), pending FTU runs
-  // are made with it meanwhile, as long as the job is not done.
-  void wait(uint64_t seq, chip::Ftu* ftu = nullptr);
+  // Waits until job `seq` (of RP rp) is done (its results are then
+  // visible). Rethrows an exception a job threw. With `own` (the engine's
+  // arithmetic), a job the worker has not started is made here with it
+  // instead (the worker then skips it), with what the worker does after it.
+  // With `ftu` (the engine's), pending FTU runs are made with it meanwhile,
+  // as long as the job is not done.
+  void wait(uint64_t seq, uint32_t rp, BatchArithmetic* own = nullptr, chip::Ftu* ftu = nullptr);
   // The next front-end packet, swapped into e (FrontEndAhead::take), waiting
   // for it if need be.
   void take_packet(FrontEndPacket& e);
@@ -257,6 +260,9 @@ class Worker {
   uint64_t push(std::vector<uint32_t>& queue, std::atomic<uint64_t>& submitted, const std::atomic<uint64_t>& taken,
                 uint32_t rp, const char* what);
   void main_wait(const std::atomic<uint64_t>& counter, uint64_t above);
+  // After rp's batch job (either thread): a batch whose RP stays in its CV
+  // pends the RP's next FTU run; true when it does.
+  bool pend_next_run(uint32_t rp);
   void fail_with(std::exception_ptr e);  // worker: records a job's exception
   void rethrow_failure() const;          // main: rethrows it, if any
 
@@ -267,6 +273,8 @@ class Worker {
   FtuAhead* ftu_ahead_;
   std::vector<uint32_t> queue_;      // batch jobs: RP pointers
   std::vector<uint32_t> ftu_queue_;  // FTU jobs: RP pointers
+  // By RP: its queued batch job was claimed (by the worker or the engine).
+  std::unique_ptr<std::atomic<bool>[]> claimed_;
   // Written by the main thread.
   alignas(kCacheLineBytes) std::atomic<uint64_t> submitted_{0};
   std::atomic<uint64_t> ftu_submitted_{0};

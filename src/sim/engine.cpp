@@ -90,6 +90,7 @@ Engine::Engine(const SceneModel& model, const Camera& camera, const SimConfig& c
     ahead_ = std::make_unique<FrontEndAhead>(zorg_, front_, vru_, kFrontEndAheadPackets);
     ftu_ahead_ = std::make_unique<FtuAhead>(model, math_, config.chip.switches.lag_first, buffer_, arithmetic_);
     worker_ = std::make_unique<Worker>(arithmetic_, buffer_, flights_, rp_capacity_, ahead_.get(), ftu_ahead_.get());
+    main_arithmetic_ = std::make_unique<BatchArithmetic>(model, config.chip, n_, math_, cfiu_, delta_);
   }
 }
 
@@ -550,7 +551,7 @@ inline void Engine::step_vru() {
 inline void Engine::complete_batch(uint32_t rp) {
   Flight& f = flights_[rp];
   if (worker_) {
-    if (!f.made) worker_->wait(f.job, &ftu_);
+    if (!f.made) worker_->wait(f.job, rp, main_arithmetic_.get(), &ftu_);
   } else if (f.deferred)
     arithmetic_.flush();
   if (f.stay) {

@@ -265,6 +265,9 @@ class Engine {
   std::unique_ptr<FrontEndAhead> ahead_;  // with threads = 2: the front end runs on the worker
   std::unique_ptr<FtuAhead> ftu_ahead_;   // with threads = 2: FTU runs made as soon as their input is final
   std::unique_ptr<Worker> worker_;
+  // With threads = 2: the arithmetic of batch jobs the engine makes itself
+  // rather than wait for the worker to start them (arithmetic_ is the worker's).
+  std::unique_ptr<BatchArithmetic> main_arithmetic_;
 
   FrontEndShell fe_;
   CtuShell ctu_s_;

@@ -28,6 +28,15 @@ ChipCounters Engine::chip_counters() const {
   if (ftu_ahead_) {  // two threads (the worker has stopped by now)
     c.tme.mlp_loads = mlp_loads_;
     c.tme.mlp_load_bytes = mlp_load_bytes_;
+    // The batches the engine made itself (their MLP loads are counted above).
+    const TmeCounters& t = main_arithmetic_->tme().counters();
+    c.tme.samples += t.samples;
+    c.tme.macs += t.macs;
+    c.tme.saturations += t.saturations;
+    const VruCounters& v = main_arithmetic_->vru().counters();
+    c.vru.samples += v.samples;
+    c.vru.samples_skipped += v.samples_skipped;
+    c.vru.rays_terminated += v.rays_terminated;
   }
   c.packets_dropped = packets_dropped_;
   c.cv_transitions = cv_transitions_;
