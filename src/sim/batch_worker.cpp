@@ -284,8 +284,7 @@ Worker::Worker(BatchArithmetic& arithmetic, RpBuffer& buffer, std::vector<Flight
       ftu_ahead_(ftu_ahead),
       queue_(2 * capacity),
       ftu_queue_(capacity),
-      claimed_(new std::atomic<bool>[capacity]) {
-  for (size_t i = 0; i < capacity; ++i) claimed_[i].store(true, std::memory_order_relaxed);
+      claimed_(new Claim[capacity]) {
   thread_ = std::thread([this] { loop(); });
 }
 
@@ -327,7 +326,7 @@ uint64_t Worker::push(std::vector<uint32_t>& queue, std::atomic<uint64_t>& submi
 uint64_t Worker::submit(uint32_t rp) {
   // Released: the worker that claims it sees the flight, even from an
   // older queue entry of rp whose job the engine made.
-  claimed_[rp].store(false);
+  claimed_[rp].taken.store(false);
   return push(queue_, submitted_, completed_, rp, "batch");
 }
 
@@ -358,7 +357,7 @@ bool Worker::pend_next_run(uint32_t rp) {
 void Worker::wait(uint64_t seq, uint32_t rp, BatchArithmetic* own, Ftu* ftu) {
   // A job the worker has not claimed is made here rather than waited for
   // (the worker is busy with work queued before it, or made ahead).
-  if (own && completed_.load() <= seq && !claimed_[rp].exchange(true)) {
+  if (own && completed_.load() <= seq && !claimed_[rp].taken.exchange(true)) {
     rethrow_failure();
     own->run(buffer_[rp], flights_[rp]);
     if (pend_next_run(rp) && ftu_ahead_->needs_job(rp)) submit_ftu(rp);
@@ -422,7 +421,7 @@ void Worker::loop() {
     const uint32_t rp = queue_[next % queue_.size()];
     bool next_run = false;
     try {
-      if (!error_ && !claimed_[rp].exchange(true)) {  // else the engine made it
+      if (!error_ && !claimed_[rp].taken.exchange(true)) {  // else the engine made it
         arithmetic_.run(buffer_[rp], flights_[rp]);
         next_run = pend_next_run(rp);
       }

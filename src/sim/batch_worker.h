@@ -274,7 +274,11 @@ class Worker {
   std::vector<uint32_t> queue_;      // batch jobs: RP pointers
   std::vector<uint32_t> ftu_queue_;  // FTU jobs: RP pointers
   // By RP: its queued batch job was claimed (by the worker or the engine).
-  std::unique_ptr<std::atomic<bool>[]> claimed_;
+  // One line each: both threads write them.
+  struct alignas(kCacheLineBytes) Claim {
+    std::atomic<bool> taken{true};
+  };
+  std::unique_ptr<Claim[]> claimed_;
   // Written by the main thread.
   alignas(kCacheLineBytes) std::atomic<uint64_t> submitted_{0};
   std::atomic<uint64_t> ftu_submitted_{0};
