@@ -23,6 +23,7 @@
 #include "model/model_io.h"
 #include "render/reference.h"
 #include "train/checkpoint_io.h"
+#include "train/fit_box.h"
 #include "train/images.h"
 #include "train/trainer.h"
 
@@ -163,8 +164,13 @@ void run_train(const TrainCmdOptions& o) {
   Dataset data = load_dataset(o.dataset, d);
   if (cfg.random_background) train::load_premultiplied_rgba(data, cfg.downscale);
 
-  std::unique_ptr<train::Trainer> trainer =
-      resuming ? std::make_unique<train::Trainer>(data, ckpt, o.resume) : std::make_unique<train::Trainer>(data, cfg);
+  // With fit_box_steps the trainer is made after the pilot run (below).
+  const bool fit_box = !resuming && cfg.fit_box_steps > 0;
+  std::unique_ptr<train::Trainer> trainer;
+  if (resuming)
+    trainer = std::make_unique<train::Trainer>(data, ckpt, o.resume);
+  else if (!fit_box)
+    trainer = std::make_unique<train::Trainer>(data, cfg);
   ckpt.clear();
   ckpt.shrink_to_fit();
 
@@ -192,6 +198,11 @@ void run_train(const TrainCmdOptions& o) {
   };
   bool done;
   try {
+    if (fit_box) {
+      say(fmt::format("fitting the scene box: a pilot run of {} steps", cfg.fit_box_steps));
+      cfg = train::fit_scene_box(data, cfg, opt).config;
+      trainer = std::make_unique<train::Trainer>(data, cfg);
+    }
     done = trainer->run(opt);
   } catch (...) {
     restore();

@@ -99,6 +99,14 @@ void TrainConfig::validate() const {
         iters, freeze_step(iters), 100.0 * (1.0 - per_cv_fraction - qat_fraction), least);
   }
   if (minutes < 0) fail("train config: minutes must not be negative");
+  if (fit_box_steps < 0 ||
+      (fit_box_steps > 0 && (fit_box_steps <= aabb_start || freeze_step(fit_box_steps) >= fit_box_steps)))
+    fail(
+        "train config: fit_box_steps {} must be 0 (off) or a pilot run's steps: more than aabb_start ({}), when "
+        "the object is first found, with steps after the occupancy freezes",
+        fit_box_steps, aabb_start);
+  if (!(fit_box_margin >= 0.f)) fail("train config: fit_box_margin must not be negative");
+  if (fit_box_max_blocks < 0) fail("train config: fit_box_max_blocks must not be negative (0: no limit)");
   if (plan_step < 10) fail("train config: plan_step must be at least 10");
   if (!(per_cv_fraction >= 0.f && qat_fraction >= 0.f && per_cv_fraction + qat_fraction < 1.f))
     fail("train config: per_cv_fraction and qat_fraction must be >= 0 and sum to less than 1");
@@ -226,6 +234,9 @@ const std::map<std::string, Field>& fields() {
       {"iters", scalar(&TrainConfig::iters)},
       {"minutes", scalar(&TrainConfig::minutes)},
       {"plan_step", scalar(&TrainConfig::plan_step)},
+      {"fit_box_steps", scalar(&TrainConfig::fit_box_steps)},
+      {"fit_box_margin", scalar(&TrainConfig::fit_box_margin)},
+      {"fit_box_max_blocks", scalar(&TrainConfig::fit_box_max_blocks)},
       {"per_cv_fraction", scalar(&TrainConfig::per_cv_fraction)},
       {"qat_fraction", scalar(&TrainConfig::qat_fraction)},
       {"batch_samples", scalar(&TrainConfig::batch_samples)},

@@ -77,6 +77,19 @@ struct TrainConfig {
   float aabb_filter_sigma = 0.6f;  // Gaussian filter of the occupancy, in micro voxels
   float aabb_keep = 0.35f;         // filtered occupancy kept in the AABB
 
+  // --- scene box fitting (train/fit_box.h) ---
+  // > 0: a pilot run of this many steps (all three phases and the pruning)
+  // finds the object first (its model's AABB), and the run then trains from
+  // the start in the smallest cube around it, fit_box_margin wider on each
+  // side, inside scene_box (finer micro voxels for a small object). The
+  // pilot's time counts against --minutes. 0: scene_box as given.
+  int64_t fit_box_steps = 0;
+  float fit_box_margin = 0.05f;  // scene units
+  // 0: no limit; else the box is no smaller than one whose model is
+  // predicted to keep to this many feature blocks (about 1 KB each: the
+  // model's size; train/fit_box.h).
+  int64_t fit_box_max_blocks = 0;
+
   // --- pruning ---
   float prune_weight = 1e-3f;         // at the start of quantization-aware training, micro voxels whose samples never
                                       // weighed (T alpha) this much in the per-CV phase are emptied; 0: keep all
