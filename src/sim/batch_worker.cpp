@@ -309,10 +309,10 @@ void Worker::signal() {
 // of jobs the engine made itself until the worker passes them: when full,
 // the engine waits for the worker to take one.
 uint64_t Worker::push(std::vector<uint32_t>& queue, std::atomic<uint64_t>& submitted,
-                      const std::atomic<uint64_t>& taken, uint32_t rp, const char* what) {
+                      const std::atomic<uint64_t>& taken, uint32_t rp, const char* what, bool wait_when_full) {
   const uint64_t seq = submitted.load();
   if (seq - taken.load() >= queue.size()) {
-    if (&queue != &queue_)
+    if (!wait_when_full)
       throw std::logic_error(fmt::format("cycle simulator: more than {} {} jobs queued", queue.size(), what));
     main_wait(taken, seq - queue.size());
     rethrow_failure();
@@ -327,10 +327,10 @@ uint64_t Worker::submit(uint32_t rp) {
   // Released: the worker that claims it sees the flight, even from an
   // older queue entry of rp whose job the engine made.
   claimed_[rp].taken.store(false);
-  return push(queue_, submitted_, completed_, rp, "batch");
+  return push(queue_, submitted_, completed_, rp, "batch", true);
 }
 
-void Worker::submit_ftu(uint32_t rp) { push(ftu_queue_, ftu_submitted_, ftu_started_, rp, "FTU"); }
+void Worker::submit_ftu(uint32_t rp) { push(ftu_queue_, ftu_submitted_, ftu_started_, rp, "FTU", false); }
 
 void Worker::main_wait(const std::atomic<uint64_t>& counter, uint64_t above) {
   if (spin_until([&] { return counter.load() > above; }, kMainSpin)) return;

@@ -256,9 +256,10 @@ class Worker {
   void loop();
   void signal();
   // Appends rp to a job ring (`taken`: the jobs the worker has started or
-  // done) and wakes the worker; returns the job's sequence number.
+  // done) and wakes the worker; returns the job's sequence number. A full
+  // ring: a wait for room with wait_when_full, else a logic error.
   uint64_t push(std::vector<uint32_t>& queue, std::atomic<uint64_t>& submitted, const std::atomic<uint64_t>& taken,
-                uint32_t rp, const char* what);
+                uint32_t rp, const char* what, bool wait_when_full);
   void main_wait(const std::atomic<uint64_t>& counter, uint64_t above);
   // After rp's batch job (either thread): a batch whose RP stays in its CV
   // pends the RP's next FTU run; true when it does.

@@ -22,6 +22,7 @@
 #include "train/images.h"
 #include "train/synthetic.h"
 #include "train/trainer.h"
+#include "train_fixture.h"
 
 namespace edrnr::train {
 namespace {
@@ -50,22 +51,17 @@ const Dataset& data() {
   return d;
 }
 
+// small_config() (train_fixture.h) on this 32^3 sphere: three levels and
+// fewer samples and rays per step.
 TrainConfig tiny(int64_t iters) {
-  TrainConfig c;
+  TrainConfig c = small_config();
   c.micro_res = 32;
   c.levels = {8, 16, 32};
   c.iters = iters;
   c.batch_samples = 2048;
   c.min_rays = 32;
   c.max_rays = 512;
-  c.per_cv_fraction = 0.15f;
-  c.qat_fraction = 0.15f;
-  c.occupancy_every = 8;
-  c.aabb_start = 64;
-  c.aabb_every = 64;
-  c.lr_warmup = 20;
-  c.plan_step = 120;
-  c.prune_cv_weight = 0.f;  // a few coarse voxels, each part of the object
+  c.seed = 0;
   return c;
 }
 
