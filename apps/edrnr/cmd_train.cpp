@@ -165,7 +165,12 @@ void run_train(const TrainCmdOptions& o) {
   if (cfg.random_background) train::load_premultiplied_rgba(data, cfg.downscale);
 
   // With fit_box_steps the trainer is made after the pilot run (below).
-  const bool fit_box = !resuming && cfg.fit_box_steps > 0;
+  const bool fit_box = !resuming && train::pilot_pays(cfg);
+  if (!resuming && cfg.fit_box_steps > 0 && !fit_box) {
+    say(fmt::format("scene box as given: {} steps are fewer than {} times the pilot's {} (fit_box_steps)", cfg.iters,
+                    train::kPilotShare, cfg.fit_box_steps));
+    cfg.fit_box_steps = 0;
+  }
   std::unique_ptr<train::Trainer> trainer;
   if (resuming)
     trainer = std::make_unique<train::Trainer>(data, ckpt, o.resume);

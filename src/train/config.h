@@ -82,13 +82,17 @@ struct TrainConfig {
   // finds the object first (its model's AABB), and the run then trains from
   // the start in the smallest cube around it, fit_box_margin wider on each
   // side, inside scene_box (finer micro voxels for a small object). The
-  // pilot's time counts against --minutes. 0: scene_box as given.
-  int64_t fit_box_steps = 0;
+  // pilot's time counts against --minutes; a run of fewer than
+  // kPilotShare (4) times its steps skips it (train/fit_box.h). 0: scene_box
+  // as given.
+  int64_t fit_box_steps = 1500;
   float fit_box_margin = 0.05f;  // scene units
-  // 0: no limit; else the box is no smaller than one whose model is
-  // predicted to keep to this many feature blocks (about 1 KB each: the
-  // model's size; train/fit_box.h).
-  int64_t fit_box_max_blocks = 0;
+  // 0: no limit; else the box is no smaller than one in which the pilot's
+  // feature blocks, scaled to the box (train/fit_box.h), number at most this
+  // many. A short pilot keeps more blocks than the finished model (lego: 1500
+  // steps 15763, the 38134-step model 0.73 times that in the same box), so
+  // this bounds the model's size (about 1 KB a block) with that margin.
+  int64_t fit_box_max_blocks = 21000;
 
   // --- pruning ---
   float prune_weight = 1e-3f;         // at the start of quantization-aware training, micro voxels whose samples never

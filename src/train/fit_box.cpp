@@ -29,6 +29,10 @@ float least_side_for_blocks(size_t blocks, float side, size_t max_blocks) {
   return float(double(side) * std::pow(double(blocks) / double(max_blocks), 1.0 / 2.5));
 }
 
+bool pilot_pays(const TrainConfig& cfg) {
+  return cfg.fit_box_steps > 0 && (cfg.minutes > 0 || cfg.iters >= kPilotShare * cfg.fit_box_steps);
+}
+
 BoxFit fit_scene_box(const Dataset& data, const TrainConfig& cfg, const TrainOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   TrainConfig pilot = cfg;

@@ -16,8 +16,8 @@ namespace edrnr::train {
 // `within` must be a cube.
 Box3f cube_around(const Box3f& object, float margin, const Box3f& within, float min_side = 0.f);
 
-// The least side of a box whose model keeps to max_blocks feature blocks,
-// predicted from `blocks` in a box of side `side`: a block covers a fine
+// The least side of a box in which `blocks` feature blocks, counted in a box
+// of side `side`, would become at most max_blocks: a block covers a fine
 // voxel, and the occupied fine voxels of a surface grow as the voxels shrink,
 // with exponent 2.5 (measured on the validation splits: lego 1.69 times the
 // blocks and mic 2.34 times for voxels 1.23 and 1.40 times finer; a plain
@@ -38,5 +38,12 @@ struct BoxFit {
 // dataset, config and seed give the same box for any thread count. Throws
 // Error if interrupted. Precondition: cfg.fit_box_steps > 0 and cfg valid.
 BoxFit fit_scene_box(const Dataset& data, const TrainConfig& cfg, const TrainOptions& options);
+
+// Whether cfg's pilot is run: cfg.fit_box_steps > 0, and the run is a time
+// budget (cfg.minutes > 0) or has at least kPilotShare times the pilot's
+// steps. A shorter run (a quick try, a test) keeps scene_box as given: the
+// pilot would cost more than the finer voxels give back.
+constexpr int64_t kPilotShare = 4;
+bool pilot_pays(const TrainConfig& cfg);
 
 }  // namespace edrnr::train

@@ -50,11 +50,27 @@ TEST(FitBox, LeastSideKeepsThePredictedBlocks) {
   EXPECT_FLOAT_EQ(least_side_for_blocks(4000, 3.f, 4000), 3.f);
 }
 
+// The pilot runs for a time budget or a run of at least 4 times its steps.
+TEST(FitBox, PilotOnlyForLongRuns) {
+  TrainConfig c;
+  EXPECT_EQ(c.fit_box_steps, 1500);  // the default preset fits the box
+  c.iters = 5999;
+  EXPECT_FALSE(pilot_pays(c));
+  c.iters = 6000;
+  EXPECT_TRUE(pilot_pays(c));
+  c.iters = 10;
+  c.minutes = 30;
+  EXPECT_TRUE(pilot_pays(c));
+  c.fit_box_steps = 0;
+  EXPECT_FALSE(pilot_pays(c));
+}
+
 TEST(FitBox, PilotFindsTheObjectAndTheRunTrainsInItsCube) {
   const Dataset data = load("train");
   TrainConfig c = short_config();
   c.fit_box_steps = 100;
   c.fit_box_margin = 0.1f;
+  c.fit_box_max_blocks = 0;
   TrainOptions one, two;
   one.threads = 1;
   two.threads = 2;

@@ -437,8 +437,9 @@ TEST(Train, DefaultPresetIsTheBuiltInDefaultsAndTheEarlierPresetsWithTheirOverla
   const TrainConfig base2 = load_train_config(train_dir / "base-v2.yaml");
   EXPECT_EQ(to_yaml(load_train_config(ablation / "per-cv-0.3-distortion-0.01.yaml", base1)), to_yaml(base2));
   TrainConfig overlays = base2;
-  for (const char* o : {"lr-2x-per-cv-0.45.yaml", "mlp-equalize-0.5.yaml", "prune-cv-0.2.yaml",
-                        "calibrate-activations.yaml", "prune-parts-0.01.yaml", "qat-lr-0.33.yaml", "lr-final-0.2.yaml"})
+  for (const char* o :
+       {"lr-2x-per-cv-0.45.yaml", "mlp-equalize-0.5.yaml", "prune-cv-0.2.yaml", "calibrate-activations.yaml",
+        "prune-parts-0.01.yaml", "qat-lr-0.33.yaml", "lr-final-0.2.yaml", "fit-box-max-21000.yaml"})
     overlays = load_train_config(ablation / o, overlays);
   EXPECT_EQ(to_yaml(overlays), to_yaml(preset));
 }
