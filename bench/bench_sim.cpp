@@ -19,7 +19,9 @@
 // median 1.57 against the reference renderer's 1.74 (median ratio 0.90), mic
 // 0.84, two threads 1.34-1.37x one thread; after the engine made the batch
 // jobs the worker had not started (session 30): medians 1.32-1.38x, best
-// 1.39-1.59x. At one micro voxel before: on an
+// 1.39-1.59x; session 31, the models in fitted boxes, a quieter window:
+// lego one thread ratio median 0.93 (1.79 s against 1.99 s), mic 0.78, two
+// threads medians 1.41-1.59x in seven runs. At one micro voxel before: on an
 // AVX2-only AMD EPYC, lego one thread median 1.46 against the reference
 // renderer's 1.45 (BM_SimulateVsReference median ratio 0.98 to 1.01), two
 // threads 1.02 (BM_TwoThreadsVsOne median 1.45x) while the host kept the
