@@ -42,7 +42,10 @@ BoxFit fit_scene_box(const Dataset& data, const TrainConfig& cfg, const TrainOpt
 // Whether cfg's pilot is run: cfg.fit_box_steps > 0, and the run is a time
 // budget (cfg.minutes > 0) or has at least kPilotShare times the pilot's
 // steps. A shorter run (a quick try, a test) keeps scene_box as given: the
-// pilot would cost more than the finer voxels give back.
+// pilot would cost more than the finer voxels give back. A --minutes run
+// always pilots, so --iters with its planned count repeats it only when that
+// count is at least kPilotShare times the pilot's steps; the run's resolved
+// config (fitted box, fit_box_steps 0) with --iters repeats it in any case.
 constexpr int64_t kPilotShare = 4;
 bool pilot_pays(const TrainConfig& cfg);
 

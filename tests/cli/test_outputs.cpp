@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <regex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -210,6 +211,29 @@ TEST_F(Outputs, TrainingLogsItsStepsWhenStderrIsAFile) {
   EXPECT_NE(r.err.find(": per-CV phase ("), std::string::npos) << r.err;
   EXPECT_NE(r.err.find(": quantize phase ("), std::string::npos) << r.err;
   EXPECT_EQ(r.err.find('\r'), std::string::npos) << "no live progress line in a file";
+}
+
+// A --minutes run with the scene-box pilot is repeated bit for bit by
+// --iters with the step count it planned (how the bundled models are
+// repeated on other machines): the pilot is the same fixed number of steps
+// either way, and the run proper changes phase at the same steps.
+TEST_F(Outputs, MinutesRunWithPilotRepeatsWithItsPlannedSteps) {
+  const std::string data = dataset();
+  const fs::path pilot = dir_ / "pilot.yaml";
+  write_file_atomic(pilot, std::string("fit_box_steps: 70\nfit_box_margin: 0.1\n"));
+  const fs::path timed = dir_ / "timed.edrnr", replay = dir_ / "replay.edrnr";
+  const std::string cfg = " --threads 1 --config " + tiny_config() + " --config " + pilot.string();
+  RunResult r = run("train " + data + " -o " + timed.string() + " --minutes 0.03" + cfg);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("fitting the scene box: a pilot run of 70 steps"), std::string::npos) << r.err;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(r.err, m, std::regex("training for ([0-9]+) steps"))) << r.err;
+  const int64_t steps = std::stoll(m[1].str());
+  ASSERT_GE(steps, 4 * 70) << "the replay would skip the pilot";
+  r = run("train " + data + " -o " + replay.string() + " --iters " + std::to_string(steps) + cfg);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("fitting the scene box: a pilot run of 70 steps"), std::string::npos) << r.err;
+  EXPECT_EQ(read_file_bytes(replay), read_file_bytes(timed));
 }
 
 // --config may be repeated: each file's keys override the one before, the
