@@ -65,7 +65,7 @@ BoxFit fit_scene_box(const Dataset& data, const TrainConfig& cfg, const TrainOpt
                     "box [{:.3f}, {:.3f}, {:.3f}] .. [{:.3f}, {:.3f}, {:.3f}] (side {:.3f}, was {:.3f})",
                     fit.seconds, cfg.fit_box_steps, fit.pilot_blocks, fit.object.lo.x, fit.object.lo.y, fit.object.lo.z,
                     fit.object.hi.x, fit.object.hi.y, fit.object.hi.z, b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z,
-                    b.hi.x - b.lo.x, cfg.scene_box.hi.x - cfg.scene_box.lo.x));
+                    b.hi.x - b.lo.x, side));
   }
   return fit;
 }
