@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 
+#include "core/error.h"
 #include "model/mlp.h"
 
 namespace edrnr {
@@ -15,9 +16,38 @@ inline double ceil_small(double x) {
   return t < x ? t + 1.0 : t;
 }
 
+// skip_box's terms per axis (FastMarcher::State) for a march of micro_ray
+// up to candidate k_end in a grid of micro_res.
+void jump_terms(int micro_res, const MicroRay& micro_ray, int64_t k_end, double exit[3], double scale[3],
+                double offset[3]) {
+  const double delta = double(micro_ray.delta);
+  // A candidate's float point o_m + d_m t_k (t_k rounded, then one rounding
+  // per operation) lies within 3 float steps of max(|o_m|, |d_m t_k|, |p_k|)
+  // of the exact line: less than max_coord * 2^-22. The margin is 8 times that.
+  const double t_max = (double(k_end) + 1.5) * delta;
+  double max_coord = double(micro_res);
+  for (int a = 0; a < 3; ++a)
+    max_coord = std::max(max_coord, std::abs(double(micro_ray.origin[a])) + std::abs(double(micro_ray.dir[a])) * t_max);
+  const double margin = max_coord * (1.0 / 524288.0);  // 2^-19
+  // skip_box: the exit face lo + exit size at the margin inside, in steps.
+  for (int a = 0; a < 3; ++a) {
+    const double d = double(micro_ray.dir[a]), o = double(micro_ray.origin[a]);
+    if (d == 0.0) {
+      exit[a] = 0;
+      scale[a] = 0;
+      offset[a] = INFINITY;
+      continue;
+    }
+    const double inv = 1.0 / (d * delta);
+    exit[a] = d > 0 ? 1.0 : 0.0;
+    scale[a] = inv;
+    offset[a] = ((d > 0 ? -margin : margin) - o) * inv - 0.5;
+  }
+}
+
 }  // namespace
 
-FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
+FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()), micro_res(model.micro_res) {
   // SampleMarcher's region with the tiers: the object AABB's micro voxels, widened by one.
   const Vec3d lo = model.scene_box.lo.cast<double>();
   const Vec3d vs = model.micro_voxel_size().cast<double>();
@@ -31,7 +61,28 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
   }
   region = Box3d{lo + vs * (v_lo - Vec3d{1, 1, 1}), lo + vs * (v_hi + Vec3d{1, 1, 1})};
 
-  const Bitmap3& fine = model.occupancy[int(Tier::Fine)];
+  build(model.occupancy[int(Tier::Fine)], model.occupancy[int(Tier::Micro)]);
+  // Each occupied fine voxel's block and its coarse voxel's MLP.
+  const size_t R = size_t(res);
+  const int per_coarse = res / model.coarse_res();
+  for (int fz = 0; fz < res; ++fz)
+    for (int fy = 0; fy < res; ++fy)
+      for (int fx = 0; fx < res; ++fx) {
+        const size_t f = size_t(fx) + R * (size_t(fy) + R * size_t(fz));
+        if (distance[f] != 0) continue;
+        uint32_t* cell = fine_words.data() + kCellWords * f;
+        cell[kCellBlock] = uint32_t(model.fine_to_block[linear_index(fx, fy, fz, res)]);
+        cell[kCellMlp] = uint32_t(
+            model.coarse_to_mlp[linear_index(fx / per_coarse, fy / per_coarse, fz / per_coarse, model.coarse_res())]);
+      }
+}
+
+FastSkipGrid::FastSkipGrid(const Bitmap3& fine, const Bitmap3& micro) : res(fine.res()), micro_res(micro.res()) {
+  if (micro_res != 4 * res) fail("FastSkipGrid: a micro grid of {} is not 4 times the fine grid of {}", micro_res, res);
+  build(fine, micro);
+}
+
+void FastSkipGrid::build(const Bitmap3& fine, const Bitmap3& micro) {
   const size_t n = size_t(res) * res * res;
   distance.assign(n + 3, uint8_t(kMaxDistance));
   // Grow the occupied set by one fine voxel in every direction (a 3x3x3 cube,
@@ -89,9 +140,7 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
     if (!grew) break;
   }
 
-  const Bitmap3& micro = model.occupancy[int(Tier::Micro)];
   fine_words.assign(kCellWords * n, 0);
-  const int per_coarse = res / model.coarse_res();
   for (int fz = 0; fz < res; ++fz)
     for (int fy = 0; fy < res; ++fy)
       for (int fx = 0; fx < res; ++fx) {
@@ -104,9 +153,6 @@ FastSkipGrid::FastSkipGrid(const SceneModel& model) : res(model.fine_res()) {
           if (micro.get(4 * fx + (i & 3), 4 * fy + ((i >> 2) & 3), 4 * fz + (i >> 4))) m |= uint64_t(1) << i;
         cell[0] = uint32_t(m);
         cell[1] = uint32_t(m >> 32);
-        cell[kCellBlock] = uint32_t(model.fine_to_block[linear_index(fx, fy, fz, res)]);
-        cell[kCellMlp] = uint32_t(
-            model.coarse_to_mlp[linear_index(fx / per_coarse, fy / per_coarse, fz / per_coarse, model.coarse_res())]);
       }
 
   // The micro gaps. Near the object (r <= kExactReach) only the shell of fine voxels
@@ -180,29 +226,14 @@ void FastMarcher::set_up(const SceneModel& model, const FastSkipGrid& skip, cons
   const double first = std::min(std::max(t_near, 0.0) / delta - 0.5, 4e18), last = std::min(t_far / delta - 0.5, 4e18);
   k = std::max<int64_t>(0, int64_t(-ceil_small(-first)) - 1);
   k_end = int64_t(ceil_small(last)) + 1;
-  // A candidate's float point o_m + d_m t_k (t_k rounded, then one rounding
-  // per operation) lies within 3 float steps of max(|o_m|, |d_m t_k|, |p_k|)
-  // of the exact line: less than max_coord * 2^-22. The margin is 8 times that.
-  const double t_max = (double(k_end) + 1.5) * delta;
-  double max_coord = double(model.micro_res);
-  for (int a = 0; a < 3; ++a)
-    max_coord = std::max(max_coord, std::abs(double(micro_ray.origin[a])) + std::abs(double(micro_ray.dir[a])) * t_max);
-  const double margin = max_coord * (1.0 / 524288.0);  // 2^-19
-  // skip_box: the exit face lo + exit size at the margin inside, in steps.
-  for (int a = 0; a < 3; ++a) {
-    const double d = double(micro_ray.dir[a]), o = double(micro_ray.origin[a]);
-    if (d == 0.0) {
-      exit[a] = 0;
-      scale[a] = 0;
-      offset[a] = INFINITY;
-      continue;
-    }
-    const double inv = 1.0 / (d * delta);
-    exit[a] = d > 0 ? 1.0 : 0.0;
-    scale[a] = inv;
-    offset[a] = ((d > 0 ? -margin : margin) - o) * inv - 0.5;
-  }
+  jump_terms(skip.micro_res, micro_ray, k_end, exit, scale, offset);
   assign(model, skip, micro_ray, k, k_end, exit, scale, offset);
+}
+
+void FastMarcher::set_up_range(const FastSkipGrid& skip, const MicroRay& micro_ray, int64_t k, int64_t k_end) {
+  double exit[3] = {0, 0, 0}, scale[3] = {0, 0, 0}, offset[3] = {0, 0, 0};
+  if (k_end >= k) jump_terms(skip.micro_res, micro_ray, k_end, exit, scale, offset);
+  assign(nullptr, skip, micro_ray, k, k_end, exit, scale, offset);
 }
 
 bool FastMarcher::next(MarchSample& s) {

@@ -41,6 +41,7 @@ struct FastSkipGrid {
   static constexpr int kMaxDistance = 15;  // cap, fine voxels
   static constexpr int kExactReach = 2;    // distance up to which reach is the exact micro gap (capped)
   int res = 0;                             // fine resolution
+  int micro_res = 0;                       // micro resolution (4 res)
   Box3d region;  // scene units: the object AABB's micro voxels widened by one, where candidates are considered
   // Per fine voxel: 0: occupied; r: every fine voxel within r - 1 is empty.
   // Followed by 3 bytes of padding, so that a 32-bit read at any voxel stays inside.
@@ -65,8 +66,17 @@ struct FastSkipGrid {
 
   // Built from the fine and micro tiers of a model (check_structure()d).
   explicit FastSkipGrid(const SceneModel& model);
+  // Built from occupancy alone (the trainer's): fine and micro bitmaps of
+  // res and 4 res, the fine one the OR of the micro one's 4x4x4 cubes. No
+  // fine voxel has a block or an MLP (their words are -1), and `region` is
+  // empty: marchers are set up with FastMarcher::set_up_range.
+  FastSkipGrid(const Bitmap3& fine, const Bitmap3& micro);
   FastSkipGrid() = default;
   uint8_t at(int x, int y, int z) const { return distance[size_t(x) + size_t(res) * (size_t(y) + size_t(res) * z)]; }
+
+ private:
+  // distance, fine_words (block and MLP words -1) and reach from the two tiers.
+  void build(const Bitmap3& fine, const Bitmap3& micro);
 };
 
 class FastMarcher {
@@ -77,27 +87,17 @@ class FastMarcher {
 
   // What the constructor does, on an existing marcher.
   void set_up(const SceneModel& model, const FastSkipGrid& skip, const Ray& ray, const MicroRay& micro_ray);
+  // A fresh march of micro_ray over the candidates [k, k_end] (k_end < k:
+  // none) of skip's occupancy, without a model: the samples are the
+  // candidates in occupied micro voxels, as any march gives them, and
+  // block() is -1. (The trainer's march: its range is its own.)
+  void set_up_range(const FastSkipGrid& skip, const MicroRay& micro_ray, int64_t k, int64_t k_end);
   // A fresh march of micro_ray over candidates [k, k_end] with skip_box's
   // terms per axis (State::exit, scale, offset), computed by the caller as
   // set_up does.
   void assign(const SceneModel& model, const FastSkipGrid& skip, const MicroRay& micro_ray, int64_t k, int64_t k_end,
               const double exit[3], const double scale[3], const double offset[3]) {
-    st_.model = &model;
-    st_.skip = &skip;
-    st_.ray = micro_ray;
-    for (int a = 0; a < 3; ++a) {
-      st_.exit[a] = exit[a];
-      st_.scale[a] = scale[a];
-      st_.offset[a] = offset[a];
-    }
-    st_.k = k;
-    st_.k_end = k_end;
-    st_.chunk_k = 0;
-    st_.pending = 0;
-    st_.dense = false;
-    st_.block = -1;
-    st_.checks = 0;
-    st_.found_next = 0;
+    assign(&model, skip, micro_ray, k, k_end, exit, scale, offset);
   }
   // A marcher of `model` without candidates (empty(), no occupancy checks);
   // the ray and the jump terms it held stay, unread (a march of it ends at
@@ -125,7 +125,7 @@ class FastMarcher {
   // What the march kernel (fast_march_group) reads and advances; no other
   // code touches it.
   struct State {
-    const SceneModel* model = nullptr;
+    const SceneModel* model = nullptr;  // null after set_up_range
     const FastSkipGrid* skip = nullptr;
     MicroRay ray;
     // skip_box's terms per axis: the exit face (0 or 1), 1 / (d_a delta) and
@@ -177,6 +177,27 @@ class FastMarcher {
   State& state() { return st_; }
 
  private:
+  // assign, the model null for set_up_range.
+  void assign(const SceneModel* model, const FastSkipGrid& skip, const MicroRay& micro_ray, int64_t k, int64_t k_end,
+              const double exit[3], const double scale[3], const double offset[3]) {
+    st_.model = model;
+    st_.skip = &skip;
+    st_.ray = micro_ray;
+    for (int a = 0; a < 3; ++a) {
+      st_.exit[a] = exit[a];
+      st_.scale[a] = scale[a];
+      st_.offset[a] = offset[a];
+    }
+    st_.k = k;
+    st_.k_end = k_end;
+    st_.chunk_k = 0;
+    st_.pending = 0;
+    st_.dense = false;
+    st_.block = -1;
+    st_.checks = 0;
+    st_.found_next = 0;
+  }
+
   State st_;
 };
 

@@ -245,7 +245,7 @@ void MarchOut(FastMarcher* const* marchers, int n, int limit, Out* out, int* cou
   Grid g;
   g.words = s0.skip->fine_words.data();
   g.reach = s0.skip->reach.data();
-  g.micro_res = s0.model->micro_res;
+  g.micro_res = s0.skip->micro_res;
   g.fine_res = s0.skip->res;
   g.hi = float(g.micro_res);
   // The marchers' iterations interleaved: their dependency chains (point,

@@ -46,27 +46,40 @@ std::vector<uint8_t> read_checkpoint_file(const std::filesystem::path& path) {
   return bytes;
 }
 
-void CheckpointWriter::put_bytes(const std::string& name, const void* data, size_t bytes) {
-  append(body_, uint32_t(name.size()));
-  body_.insert(body_.end(), name.begin(), name.end());
-  append(body_, uint64_t(bytes));
-  const auto* p = static_cast<const uint8_t*>(data);
-  if (bytes) body_.insert(body_.end(), p, p + bytes);
-  ++count_;
+CheckpointWriter::CheckpointWriter(bool count_only) : count_only_(count_only) {
+  if (!count_only_) out_.resize(kHeaderBytes);
 }
 
-std::vector<uint8_t> CheckpointWriter::finish() const {
-  // Sized first and filled with memcpy: GCC 12 warns (falsely) about an
-  // overflow when the magic is inserted into a reserved, empty vector.
-  std::vector<uint8_t> out(sizeof kMagic);
-  std::memcpy(out.data(), kMagic, sizeof kMagic);
-  out.reserve(kHeaderBytes + body_.size());
-  append(out, kCheckpointVersion);
-  append(out, count_);
-  append(out, crc32_of(body_.data(), body_.size()));
-  append(out, uint32_t(0));
-  out.insert(out.end(), body_.begin(), body_.end());
-  return out;
+void CheckpointWriter::reserve(size_t body_bytes) {
+  if (!count_only_) out_.reserve(kHeaderBytes + body_bytes);
+}
+
+void CheckpointWriter::put_bytes(const std::string& name, const void* data, size_t bytes) {
+  body_bytes_ += sizeof(uint32_t) + name.size() + sizeof(uint64_t) + bytes;
+  ++count_;
+  if (count_only_) return;
+  append(out_, uint32_t(name.size()));
+  out_.insert(out_.end(), name.begin(), name.end());
+  append(out_, uint64_t(bytes));
+  const auto* p = static_cast<const uint8_t*>(data);
+  if (bytes) out_.insert(out_.end(), p, p + bytes);
+}
+
+std::vector<uint8_t> CheckpointWriter::finish() {
+  if (count_only_) fail("checkpoint writer: a counting writer has no file to finish");
+  // The header in the room left for it: magic, version, count, CRC, padding.
+  uint8_t* h = out_.data();
+  const uint32_t crc = crc32_of(h + kHeaderBytes, out_.size() - kHeaderBytes), pad = 0;
+  std::memcpy(h, kMagic, sizeof kMagic);
+  std::memcpy(h + 8, &kCheckpointVersion, 4);
+  std::memcpy(h + 12, &count_, 4);
+  std::memcpy(h + 16, &crc, 4);
+  std::memcpy(h + 20, &pad, 4);
+  std::vector<uint8_t> done = std::move(out_);
+  out_.assign(kHeaderBytes, 0);
+  body_bytes_ = 0;
+  count_ = 0;
+  return done;
 }
 
 CheckpointReader::CheckpointReader(const std::vector<uint8_t>& bytes, std::string source) : source_(std::move(source)) {

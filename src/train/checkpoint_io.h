@@ -24,6 +24,9 @@ std::vector<uint8_t> read_checkpoint_file(const std::filesystem::path& path);
 
 class CheckpointWriter {
  public:
+  // A writer; with count_only, one that only adds up the sections' sizes
+  // (body_bytes(), for reserve() of the writer that writes them).
+  explicit CheckpointWriter(bool count_only = false);
   void put_bytes(const std::string& name, const void* data, size_t bytes);
   template <class T>
   void put(const std::string& name, const std::vector<T>& v) {
@@ -34,11 +37,17 @@ class CheckpointWriter {
     put_bytes(name, &v, sizeof v);
   }
   void put_string(const std::string& name, const std::string& s) { put_bytes(name, s.data(), s.size()); }
-  // The finished file.
-  std::vector<uint8_t> finish() const;
+  // Bytes of the sections so far (as written, names and sizes included).
+  size_t body_bytes() const { return body_bytes_; }
+  // Room for body_bytes of sections, so that no section is copied twice.
+  void reserve(size_t body_bytes);
+  // The finished file; the writer is left empty.
+  std::vector<uint8_t> finish();
 
  private:
-  std::vector<uint8_t> body_;
+  bool count_only_ = false;
+  std::vector<uint8_t> out_;  // the header's room, then the sections
+  size_t body_bytes_ = 0;
   uint32_t count_ = 0;
 };
 

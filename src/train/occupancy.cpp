@@ -1,6 +1,7 @@
 #include "train/occupancy.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 
 namespace edrnr::train {
@@ -51,6 +52,8 @@ void OccupancyGrid::rebuild(float threshold) {
 }
 
 void OccupancyGrid::rebuild_macro() {
+  static std::atomic<uint64_t> last_generation{0};
+  generation = ++last_generation;
   macro = Bitmap3(res / kMacroCell);
   fine = Bitmap3(res / 4);
   coarse_cell = std::max(1, std::min(kCoarseCell, res));

@@ -23,6 +23,9 @@ struct OccupancyGrid {
   Bitmap3 macro;               // OR of kMacroCell^3 micro voxels
   Bitmap3 fine;                // OR of 4^3 micro voxels (the fine tier)
   Bitmap3 coarse;              // OR of kCoarseCell^3 micro voxels (at least one cell)
+  // Changes (to a value no grid had before) whenever rebuild_macro runs, so
+  // that what is derived from the bitmaps can tell when to derive it again.
+  uint64_t generation = 0;
   bool aabb_known = false;
   Vec3i aabb_lo{0, 0, 0}, aabb_hi{0, 0, 0};  // inclusive micro voxel bounds of the object AABB
 
@@ -43,7 +46,7 @@ struct OccupancyGrid {
   // Rebuilds micro and macro bitmaps: occupied iff not yet evaluated or
   // density > threshold, and inside the AABB when it is known.
   void rebuild(float threshold);
-  // Rebuilds the coarse, macro and fine bitmaps from the micro bitmap.
+  // Rebuilds the coarse, macro and fine bitmaps from the micro bitmap; a new generation.
   void rebuild_macro();
   // Recomputes the AABB from the occupancy (density > threshold or not yet
   // evaluated, ignoring the current AABB) filtered by a Gaussian of

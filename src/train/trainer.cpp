@@ -311,8 +311,12 @@ bool Trainer::run(const TrainOptions& options) {
   };
   auto write_checkpoint = [&]() {
     if (options.checkpoint_path.empty()) return;
-    write_file_atomic(options.checkpoint_path, s.save());
-    log(fmt::format("checkpoint at step {} written to {}", s.step, options.checkpoint_path.string()));
+    const auto t0 = clock::now();
+    const std::vector<uint8_t> bytes = s.save();
+    write_file_atomic(options.checkpoint_path, bytes);
+    log(fmt::format("checkpoint at step {} written to {} ({:.2f} GB in {:.1f} s)", s.step,
+                    options.checkpoint_path.string(), double(bytes.size()) * 1e-9,
+                    std::chrono::duration<double>(clock::now() - t0).count()));
   };
   // A periodic checkpoint is a safety net: failing to write one (a full disk)
   // must not end the run it protects. The previous checkpoint stays intact.

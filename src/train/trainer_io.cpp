@@ -130,49 +130,56 @@ SceneModel Trainer::State::make_model(bool quantized) const {
 // --- checkpoints ------------------------------------------------------------
 
 std::vector<uint8_t> Trainer::State::save() const {
-  CheckpointWriter w;
-  w.put_string("config", to_yaml(cfg));
-  w.put_value("dataset_fingerprint", dataset_fingerprint(data));
-  w.put_value("step", step);
-  w.put_value("iters", iters);
-  w.put_value("iters_fixed", uint8_t(iters_fixed));
-  w.put_value("phase", int32_t(phase));
-  w.put_value("n_rays", int32_t(n_rays));
-  w.put_value("mse_ema", mse_ema);
-  w.put_value("psnr_float", psnr_float);
-  w.put_value("psnr_quantized", psnr_quantized);
-  w.put_value("occ_updates", occ_updates);
-  w.put_value("feature_adam_t", feature_adam_t);
-  w.put_value("mlp_adam_t", mlp_adam_t);
-  w.put("occ_density", occ.density);
-  w.put("occ_micro", occ.micro.words());
-  w.put_value("occ_aabb_known", uint8_t(occ.aabb_known));
-  const int32_t aabb[6] = {occ.aabb_lo.x, occ.aabb_lo.y, occ.aabb_lo.z, occ.aabb_hi.x, occ.aabb_hi.y, occ.aabb_hi.z};
-  w.put_bytes("occ_aabb", aabb, sizeof aabb);
-  if (phase == Phase::Main) {
-    for (size_t li = 0; li < pyramid.levels().size(); ++li) {
-      const auto& L = pyramid.levels()[li];
-      w.put(fmt::format("level{}_value", li), L.value);
-      w.put(fmt::format("level{}_m", li), L.adam.m);
-      w.put(fmt::format("level{}_v", li), L.adam.v);
-    }
-  } else {
-    w.put("block_fine_index", blocks.fine_index());
-    w.put("block_value", blocks.values());
-    w.put("block_m", const_cast<BlockFeatures&>(blocks).adam().m);
-    w.put("block_v", const_cast<BlockFeatures&>(blocks).adam().v);
-    w.put("mlp_cv", mlp_cv);
-  }
+  // The sections, once counted (to reserve the whole file) and once written.
   std::vector<float> q;
   for (const auto& c : feature_quant) q.insert(q.end(), {c.scale, float(c.zero_point)});
-  w.put("feature_quant", q);
-  w.put("mlp_params", mlp_params);
-  w.put("mlp_m", mlp_m);
-  w.put("mlp_v", mlp_v);
-  w.put("layer_in_max", layer_in_max);
-  w.put("max_weight", max_weight);
-  w.put("float_blocks", float_blocks);
-  w.put("float_mlps", float_mlps);
+  const auto put_all = [&](CheckpointWriter& w) {
+    w.put_string("config", to_yaml(cfg));
+    w.put_value("dataset_fingerprint", dataset_fingerprint(data));
+    w.put_value("step", step);
+    w.put_value("iters", iters);
+    w.put_value("iters_fixed", uint8_t(iters_fixed));
+    w.put_value("phase", int32_t(phase));
+    w.put_value("n_rays", int32_t(n_rays));
+    w.put_value("mse_ema", mse_ema);
+    w.put_value("psnr_float", psnr_float);
+    w.put_value("psnr_quantized", psnr_quantized);
+    w.put_value("occ_updates", occ_updates);
+    w.put_value("feature_adam_t", feature_adam_t);
+    w.put_value("mlp_adam_t", mlp_adam_t);
+    w.put("occ_density", occ.density);
+    w.put("occ_micro", occ.micro.words());
+    w.put_value("occ_aabb_known", uint8_t(occ.aabb_known));
+    const int32_t aabb[6] = {occ.aabb_lo.x, occ.aabb_lo.y, occ.aabb_lo.z, occ.aabb_hi.x, occ.aabb_hi.y, occ.aabb_hi.z};
+    w.put_bytes("occ_aabb", aabb, sizeof aabb);
+    if (phase == Phase::Main) {
+      for (size_t li = 0; li < pyramid.levels().size(); ++li) {
+        const auto& L = pyramid.levels()[li];
+        w.put(fmt::format("level{}_value", li), L.value);
+        w.put(fmt::format("level{}_m", li), L.adam.m);
+        w.put(fmt::format("level{}_v", li), L.adam.v);
+      }
+    } else {
+      w.put("block_fine_index", blocks.fine_index());
+      w.put("block_value", blocks.values());
+      w.put("block_m", const_cast<BlockFeatures&>(blocks).adam().m);
+      w.put("block_v", const_cast<BlockFeatures&>(blocks).adam().v);
+      w.put("mlp_cv", mlp_cv);
+    }
+    w.put("feature_quant", q);
+    w.put("mlp_params", mlp_params);
+    w.put("mlp_m", mlp_m);
+    w.put("mlp_v", mlp_v);
+    w.put("layer_in_max", layer_in_max);
+    w.put("max_weight", max_weight);
+    w.put("float_blocks", float_blocks);
+    w.put("float_mlps", float_mlps);
+  };
+  CheckpointWriter sizes(true);
+  put_all(sizes);
+  CheckpointWriter w;
+  w.reserve(sizes.body_bytes());
+  put_all(w);
   return w.finish();
 }
 

@@ -106,13 +106,30 @@ void Trainer::State::sample_training_rays(Batch& b, int n) {
   resize_rays(b, n);
   const uint64_t total = pixel_start.back();
   const uint64_t base = hash3(cfg.seed, uint64_t(RngStream::Rays), uint64_t(step));
+  // Ray i's pixel: its frame, x and y.
+  const auto pixel_of = [&](int i, size_t& f, int& x, int& y) {
+    const uint64_t px = hash_combine(base, uint64_t(i)) % total;
+    f = size_t(std::upper_bound(pixel_start.begin(), pixel_start.end(), px) - pixel_start.begin()) - 1;
+    const uint64_t local = px - pixel_start[f];
+    const uint64_t w = uint64_t(data.frames[f].image.width);
+    x = int(local % w);
+    y = int(local / w);
+  };
+  // The pixels lie anywhere in the images (a gigabyte for 100 RGBA frames of
+  // 800 x 800): each is fetched this many rays ahead.
+  constexpr int kAhead = 8;
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
-    const uint64_t px = hash_combine(base, uint64_t(i)) % total;
-    const size_t f = size_t(std::upper_bound(pixel_start.begin(), pixel_start.end(), px) - pixel_start.begin()) - 1;
+    if (i + kAhead < n) {
+      size_t fa;
+      int xa, ya;
+      pixel_of(i + kAhead, fa, xa, ya);
+      __builtin_prefetch(data.frames[fa].image.at(xa, ya));
+    }
+    size_t f;
+    int x, y;
+    pixel_of(i, f, x, y);
     const Frame& fr = data.frames[f];
-    const uint64_t local = px - pixel_start[f];
-    const int x = int(local % uint64_t(fr.image.width)), y = int(local / uint64_t(fr.image.width));
     const uint64_t h = mix64(hash_combine(base, uint64_t(i)));
     if (cfg.pixel_jitter)  // a point of the pixel's square, drawn apart from the background's colour
       set_ray(b, i,
@@ -137,24 +154,6 @@ void Trainer::State::sample_training_rays(Batch& b, int n) {
 }
 
 // --- sampling -------------------------------------------------------------
-
-// Position of candidate k of ray i in micro-grid units (exactly as the renderer computes it).
-Vec3f Trainer::State::candidate(const Batch& b, int i, int32_t k) const { return b.mray[size_t(i)].point(k); }
-
-// How many of the candidates after the one at p (in micro voxel m) surely
-// lie in the same cell of cell^3 micro voxels: one fewer than the whole
-// steps to the cell's exit, a margin far above the rounding of the
-// candidates' points.
-int32_t Trainer::State::candidates_left_in_cell(const MicroRay& r, const Vec3f& p, const Vec3i& m, int cell) const {
-  float t_exit = INFINITY;
-  for (int a = 0; a < 3; ++a) {
-    const float lo = float((m[a] / cell) * cell), hi = lo + float(cell);
-    if (r.dir[a] > 0.f) t_exit = std::min(t_exit, (hi - p[a]) / r.dir[a]);
-    if (r.dir[a] < 0.f) t_exit = std::min(t_exit, (lo - p[a]) / r.dir[a]);
-  }
-  const float steps = std::floor(t_exit / delta);
-  return steps > 1.f ? int32_t(std::min(steps, 1e6f)) - 1 : 0;
-}
 
 int32_t Trainer::State::mlp_of_micro(int x, int y, int z) const {
   if (phase == Phase::Main) return 0;
@@ -181,61 +180,59 @@ void Trainer::State::prefetch_features(const Vec3i& m) const {
     blocks.prefetch(m);
 }
 
+const FastSkipGrid& Trainer::State::march_grid() const {
+  if (march_grid_generation_ != occ.generation) {
+    march_grid_ = FastSkipGrid(occ.fine, occ.micro);
+    march_grid_generation_ = occ.generation;
+  }
+  return march_grid_;
+}
+
 // Marches every ray in rounds; evaluates density for each new sample and
 // stops a ray once its transmittance falls below the threshold. Fills the
-// active samples (b.order, b.ray_first, b.ray_count).
+// active samples (b.order, b.ray_first, b.ray_count). The samples of a ray
+// are its candidates k_next..k_last in occupied micro voxels, found by the
+// fast renderer's vector march (render/fast_march.h) over the occupancy.
 void Trainer::State::march(Batch& b) const {
   b.n_samples = 0;
   const int n = b.n_rays;
+  const FastSkipGrid& grid = march_grid();
   std::vector<int32_t> live;
   for (int i = 0; i < n; ++i)
     if (b.alive[size_t(i)]) live.push_back(i);
+  b.marchers.resize(size_t(n));
+#pragma omp parallel for schedule(static)
+  for (size_t li = 0; li < live.size(); ++li) {
+    const size_t i = size_t(live[li]);
+    b.marchers[i].set_up_range(grid, b.mray[i], b.k_next[i], b.k_last[i]);
+  }
   std::vector<std::vector<int32_t>> seg_begin, seg_used;  // per round, per live ray index
   std::vector<std::vector<int32_t>> round_rays;
   std::vector<int32_t> count;
-  std::vector<float> cand_pos;
-  std::vector<int16_t> cand_micro;
-  std::vector<int32_t> cand_k;
   for (int round = 0; !live.empty(); ++round) {
     const int K = std::min(kMaxRoundSamples, kFirstRoundSamples << std::min(round, 8));
     const size_t L = live.size();
     count.assign(L, 0);
-    cand_pos.resize(L * size_t(K) * 3);
-    cand_micro.resize(L * size_t(K) * 3);
-    cand_k.resize(L * size_t(K));
-#pragma omp parallel for schedule(dynamic, 64)
-    for (size_t li = 0; li < L; ++li) {
-      const int i = live[li];
-      int32_t k = b.k_next[size_t(i)];
-      const int32_t k_last = b.k_last[size_t(i)];
-      int c = 0;
-      for (; k <= k_last && c < K; ++k) {
-        const Vec3f p = candidate(b, i, k);
-        Vec3i m;
-        if (!micro_voxel_of(p, cfg.micro_res, m)) continue;
-        if (!occ.coarse_occupied(m.x, m.y, m.z)) {
-          k += candidates_left_in_cell(b.mray[size_t(i)], p, m, occ.coarse_cell);
-          continue;
+    b.found.resize(L * size_t(K));
+    b.ended.assign(L, 0);
+    const int groups = int((L + kFastMarchGroup - 1) / kFastMarchGroup);
+#pragma omp parallel
+    {
+      std::vector<int32_t> blocks(size_t(kFastMarchGroup) * size_t(K));
+#pragma omp for schedule(dynamic, 16)
+      for (int g = 0; g < groups; ++g) {
+        const size_t l0 = size_t(g) * kFastMarchGroup;
+        const int m = int(std::min<size_t>(kFastMarchGroup, L - l0));
+        FastMarcher* group[kFastMarchGroup];
+        int counts[kFastMarchGroup];
+        bool ended[kFastMarchGroup];
+        for (int j = 0; j < m; ++j) group[j] = &b.marchers[size_t(live[l0 + size_t(j)])];
+        fast_march_group(group, m, K, &b.found[l0 * size_t(K)], blocks.data(), counts, ended);
+        for (int j = 0; j < m; ++j) {
+          count[l0 + size_t(j)] = counts[j];
+          b.ended[l0 + size_t(j)] = ended[j];
         }
-        if (!occ.macro_occupied(m.x, m.y, m.z)) {
-          k += candidates_left_in_cell(b.mray[size_t(i)], p, m, kMacroCell);
-          continue;
-        }
-        if (!occ.fine_occupied(m.x, m.y, m.z)) {
-          k += candidates_left_in_cell(b.mray[size_t(i)], p, m, 4);
-          continue;
-        }
-        if (!occ.occupied(m.x, m.y, m.z)) continue;
-        const size_t o = (li * size_t(K) + size_t(c)) * 3;
-        for (int a = 0; a < 3; ++a) {
-          cand_pos[o + size_t(a)] = p[a];
-          cand_micro[o + size_t(a)] = int16_t(m[a]);
-        }
-        cand_k[li * size_t(K) + size_t(c)] = k;
-        ++c;
       }
-      b.k_next[size_t(i)] = k;
-      count[li] = c;
     }
     // Append the round's samples, ray by ray.
     const size_t s0 = b.n_samples;
@@ -250,13 +247,13 @@ void Trainer::State::march(Batch& b) const {
     for (size_t li = 0; li < L; ++li) {
       for (int c = 0; c < count[li]; ++c) {
         const size_t s = size_t(begin[li]) + size_t(c);
-        const size_t o = (li * size_t(K) + size_t(c)) * 3;
+        const MarchSample& f = b.found[li * size_t(K) + size_t(c)];
         for (int a = 0; a < 3; ++a) {
-          b.pos[3 * s + size_t(a)] = cand_pos[o + size_t(a)];
-          b.micro[3 * s + size_t(a)] = cand_micro[o + size_t(a)];
+          b.pos[3 * s + size_t(a)] = f.p_micro[a];
+          b.micro[3 * s + size_t(a)] = int16_t(f.voxel[a]);
         }
         b.ray[s] = live[li];
-        b.cand[s] = cand_k[li * size_t(K) + size_t(c)];
+        b.cand[s] = int32_t(f.k);
         b.mlp[s] = mlp_of_micro(b.micro[3 * s], b.micro[3 * s + 1], b.micro[3 * s + 2]);
         b.active[s] = 0;
       }
@@ -278,7 +275,7 @@ void Trainer::State::march(Batch& b) const {
       b.trans[size_t(i)] = T;
       used[li] = u;
       for (int j = 0; j < u; ++j) b.active[size_t(begin[li]) + size_t(j)] = 1;
-      if (T < cfg.transmittance_min || b.k_next[size_t(i)] > b.k_last[size_t(i)]) b.alive[size_t(i)] = 0;
+      if (T < cfg.transmittance_min || b.ended[li]) b.alive[size_t(i)] = 0;
     }
     seg_begin.push_back(begin);
     seg_used.push_back(used);

@@ -13,6 +13,7 @@
 #include "core/vec.h"
 #include "data/camera.h"
 #include "model/scene_model.h"
+#include "render/fast_march.h"
 #include "render/traversal.h"
 #include "train/adam.h"
 #include "train/checkpoint_io.h"
@@ -34,11 +35,11 @@ struct WorkItem {
 // Rays and samples of one step (reused between steps).
 struct Batch {
   int n_rays = 0;
-  std::vector<MicroRay> mray;     // each ray in micro-grid units (the renderer's sampling)
-  std::vector<float> target;      // 3 per ray
-  std::vector<float> background;  // 3 per ray
-  std::vector<float> dir_enc;     // dir_dims per ray
-  std::vector<int32_t> k_next, k_last;
+  std::vector<MicroRay> mray;           // each ray in micro-grid units (the renderer's sampling)
+  std::vector<float> target;            // 3 per ray
+  std::vector<float> background;        // 3 per ray
+  std::vector<float> dir_enc;           // dir_dims per ray
+  std::vector<int32_t> k_next, k_last;  // each ray's candidate range (k_next: its first)
   std::vector<float> trans;
   std::vector<uint8_t> alive;
   std::vector<int32_t> ray_first, ray_count;  // each ray's active samples in `order`
@@ -64,6 +65,11 @@ struct Batch {
   std::vector<int32_t> col_ids;
   std::vector<WorkItem> col_items;
   std::vector<float> col_acts;
+
+  // The march's scratch (Trainer::State::march), kept between steps.
+  std::vector<FastMarcher> marchers;  // per ray
+  std::vector<MarchSample> found;     // per live ray, the round's samples
+  std::vector<uint8_t> ended;         // per live ray: no candidates left
 
   void reserve_samples(size_t n, int F, int G) {
     if (pos.size() >= 3 * n) return;
@@ -117,6 +123,9 @@ struct Trainer::State {
   FeaturePyramid pyramid;
   BlockFeatures blocks;
   OccupancyGrid occ;
+  // occ's micro occupancy as the vector march reads it (march_grid()).
+  mutable FastSkipGrid march_grid_;
+  mutable uint64_t march_grid_generation_ = 0;
   std::vector<Int4Channel> feature_quant;  // quantization-aware phase
 
   int n_mlps = 1;
@@ -167,12 +176,12 @@ struct Trainer::State {
 
   // --- sampling (trainer_sampling.cpp) ---------------------------------------
 
-  Vec3f candidate(const trainer_detail::Batch& b, int i, int32_t k) const;
-  int32_t candidates_left_in_cell(const MicroRay& r, const Vec3f& p, const Vec3i& m, int cell) const;
   int32_t mlp_of_micro(int x, int y, int z) const;
   const float* mlp_weights(int m) const;
   void interpolate(const Vec3f& p, const Vec3i& m, float* out) const;
   void prefetch_features(const Vec3i& m) const;
+  // The march grid of the occupancy as it is now (rebuilt when occ changed).
+  const FastSkipGrid& march_grid() const;
   void march(trainer_detail::Batch& b) const;
   void evaluate_density(trainer_detail::Batch& b, size_t s0, size_t s1) const;
   void gather_color_input(const trainer_detail::Batch& b, const std::vector<int32_t>& ids, int32_t c0, int nl,

@@ -1,6 +1,7 @@
 // The fast renderer's march near the surfaces: the reach field against a
 // brute-force search, the samples against the reference march on a scene of
-// small solids, and the records the renderer takes.
+// small solids, the records the renderer takes, and the march over a given
+// candidate range of an occupancy grid (the trainer's).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -8,6 +9,7 @@
 #include <vector>
 
 #include "fast_scenes.h"
+#include "model/mlp.h"
 #include "render/fast_march.h"
 #include "render/traversal.h"
 
@@ -143,6 +145,69 @@ TEST(Fast, MarchRecordsAreTheGroupedSamples) {
           }
         }
   EXPECT_GT(total, 1000u);
+}
+
+// The grid built from the occupancy alone (the trainer's) is the model's
+// without blocks and MLPs, and a march over any candidate range of it
+// (set_up_range, several calls of a few samples each, as the trainer's
+// rounds) yields exactly the candidates of the range whose float points lie
+// in occupied micro voxels, found here one by one.
+TEST(Fast, MarchOverARangeYieldsItsOccupiedCandidates) {
+  const SceneModel m = dust_model(128);
+  const FastSkipGrid from_model(m);
+  const FastSkipGrid skip(m.occupancy[int(Tier::Fine)], m.occupancy[int(Tier::Micro)]);
+  ASSERT_EQ(skip.micro_res, m.micro_res);
+  ASSERT_EQ(skip.distance, from_model.distance);
+  ASSERT_EQ(skip.reach, from_model.reach);
+  ASSERT_EQ(skip.fine_words.size(), from_model.fine_words.size());
+  for (size_t f = 0; f < skip.fine_words.size(); f += FastSkipGrid::kCellWords) {
+    ASSERT_EQ(skip.fine_words[f], from_model.fine_words[f]);
+    ASSERT_EQ(skip.fine_words[f + 1], from_model.fine_words[f + 1]);
+    ASSERT_EQ(skip.fine_words[f + FastSkipGrid::kCellBlock], uint32_t(-1));
+  }
+  const Bitmap3& micro = m.occupancy[int(Tier::Micro)];
+  const float delta = sample_spacing(m, 0.5f);
+  size_t total = 0, rays = 0;
+  for (const Camera& cam : {views(61, 47)[0], views(61, 47)[1], views(61, 47)[2]})
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        const MicroRay r = make_micro_ray(m, cam.pixel_ray(x, y), delta);
+        // Ranges that start and end anywhere, also in empty space and outside the grid.
+        const int64_t k0 = (x * 37 + y * 11) % 500, k1 = k0 + 300 + (x * y) % 900;
+        std::vector<MarchSample> want;
+        for (int64_t k = k0; k <= k1; ++k) {
+          MarchSample s;
+          s.k = k;
+          s.p_micro = r.point(k);
+          if (micro_voxel_of(s.p_micro, m.micro_res, s.voxel) && micro.get(s.voxel.x, s.voxel.y, s.voxel.z))
+            want.push_back(s);
+        }
+        FastMarcher fm;
+        fm.set_up_range(skip, r, k0, k1);
+        FastMarcher* group[1] = {&fm};
+        std::vector<MarchSample> got;
+        for (int call = 0; call < 100000; ++call) {
+          MarchSample out[5];
+          int32_t blocks[5];
+          int count = 0;
+          bool ended = false;
+          fast_march_group(group, 1, 5, out, blocks, &count, &ended);
+          got.insert(got.end(), out, out + count);
+          if (ended) break;
+          ASSERT_EQ(count, 5);
+        }
+        ASSERT_EQ(got.size(), want.size()) << x << "," << y;
+        for (size_t i = 0; i < got.size(); ++i) {
+          ASSERT_EQ(got[i].k, want[i].k);
+          ASSERT_EQ(got[i].voxel, want[i].voxel);
+          for (int a = 0; a < 3; ++a)
+            ASSERT_EQ(std::bit_cast<uint32_t>(got[i].p_micro[a]), std::bit_cast<uint32_t>(want[i].p_micro[a]));
+        }
+        total += got.size();
+        rays += !got.empty();
+      }
+  EXPECT_GT(total, 1500u);
+  EXPECT_GT(rays, 300u);
 }
 
 }  // namespace
