@@ -7,11 +7,7 @@
 namespace edrnr::train {
 
 OccupancyGrid::OccupancyGrid(int micro_res)
-    : res(micro_res),
-      density(size_t(micro_res) * micro_res * micro_res, -1.f),
-      micro(micro_res),
-      macro(micro_res / kMacroCell),
-      fine(micro_res / 4) {
+    : res(micro_res), density(size_t(micro_res) * micro_res * micro_res, -1.f), micro(micro_res), fine(micro_res / 4) {
   rebuild(0.f);
 }
 
@@ -54,10 +50,7 @@ void OccupancyGrid::rebuild(float threshold) {
 void OccupancyGrid::rebuild_macro() {
   static std::atomic<uint64_t> last_generation{0};
   generation = ++last_generation;
-  macro = Bitmap3(res / kMacroCell);
   fine = Bitmap3(res / 4);
-  coarse_cell = std::max(1, std::min(kCoarseCell, res));
-  coarse = Bitmap3(res / coarse_cell);
   const auto& words = micro.words();
   // A word holds 64 consecutive x of one row (res is a multiple of 32, so a
   // word may hold two rows when res == 32).
@@ -67,9 +60,7 @@ void OccupancyGrid::rebuild_macro() {
       const size_t i = wi * 64 + size_t(__builtin_ctzll(w));
       w &= w - 1;
       const int x = int(i % size_t(res)), y = int((i / size_t(res)) % size_t(res)), z = int(i / (size_t(res) * res));
-      macro.set(x / kMacroCell, y / kMacroCell, z / kMacroCell);
       fine.set(x / 4, y / 4, z / 4);
-      coarse.set(x / coarse_cell, y / coarse_cell, z / coarse_cell);
     }
   }
 }

@@ -12,17 +12,13 @@
 
 namespace edrnr::train {
 
-inline constexpr int kSweepParts = 8;   // cells are refreshed in 8 interleaved parts (coordinate parities)
-inline constexpr int kMacroCell = 8;    // micro voxels per macro cell edge (fast empty-space skipping)
-inline constexpr int kCoarseCell = 32;  // micro voxels per coarse cell edge (the coarse voxels; skipping first)
+inline constexpr int kSweepParts = 8;  // cells are refreshed in 8 interleaved parts (coordinate parities)
 
 struct OccupancyGrid {
   int res = 0;
   std::vector<float> density;  // running max of sigma per micro voxel; < 0: not evaluated yet
   Bitmap3 micro;               // occupancy, res^3
-  Bitmap3 macro;               // OR of kMacroCell^3 micro voxels
   Bitmap3 fine;                // OR of 4^3 micro voxels (the fine tier)
-  Bitmap3 coarse;              // OR of kCoarseCell^3 micro voxels (at least one cell)
   // Changes (to a value no grid had before) whenever rebuild_macro runs, so
   // that what is derived from the bitmaps can tell when to derive it again.
   uint64_t generation = 0;
@@ -32,21 +28,15 @@ struct OccupancyGrid {
   explicit OccupancyGrid(int micro_res = 0);
 
   bool occupied(int x, int y, int z) const { return micro.get(x, y, z); }
-  bool macro_occupied(int x, int y, int z) const { return macro.get(x / kMacroCell, y / kMacroCell, z / kMacroCell); }
-  bool fine_occupied(int x, int y, int z) const { return fine.get(x / 4, y / 4, z / 4); }
-  bool coarse_occupied(int x, int y, int z) const {
-    return coarse.get(x / coarse_cell, y / coarse_cell, z / coarse_cell);
-  }
-  int coarse_cell = kCoarseCell;  // kCoarseCell, or res for grids smaller than that
   // Micro voxels in sweep part p, in linear (x fastest) order.
   static bool in_part(int x, int y, int z, int part) { return ((x & 1) | ((y & 1) << 1) | ((z & 1) << 2)) == part; }
 
   // Mean density over evaluated voxels.
   double mean_density() const;
-  // Rebuilds micro and macro bitmaps: occupied iff not yet evaluated or
+  // Rebuilds the micro and fine bitmaps: occupied iff not yet evaluated or
   // density > threshold, and inside the AABB when it is known.
   void rebuild(float threshold);
-  // Rebuilds the coarse, macro and fine bitmaps from the micro bitmap; a new generation.
+  // Rebuilds the fine bitmap from the micro bitmap; a new generation.
   void rebuild_macro();
   // Recomputes the AABB from the occupancy (density > threshold or not yet
   // evaluated, ignoring the current AABB) filtered by a Gaussian of
