@@ -37,6 +37,31 @@ int64_t TrainConfig::freeze_step(int64_t n) const {
   return std::max<int64_t>(1, int64_t(std::llround(double(n) * (1.0 - per_cv_fraction - qat_fraction))));
 }
 
+double TrainConfig::planned_seconds(int64_t step, int64_t n, double seconds_per_step) const {
+  const int64_t freeze = freeze_step(n);
+  const int64_t qat = std::max(freeze, int64_t(std::llround(double(n) * (1.0 - qat_fraction))));
+  const auto span = [&](int64_t a, int64_t b) { return double(std::max<int64_t>(0, b - std::max(a, step))); };
+  return seconds_per_step * (double(plan_cost_main) * span(step, freeze) +
+                             double(plan_cost_per_cv) * span(freeze, qat) + double(plan_cost_qat) * span(qat, n));
+}
+
+int64_t TrainConfig::plan_iters(int64_t step, double seconds_per_step, double seconds_left) const {
+  const double p = std::max(seconds_per_step, 1e-6);
+  const double target = (1.0 - double(plan_reserve)) * std::max(seconds_left, 0.0);
+  const double main_share = 1.0 - double(per_cv_fraction) - double(qat_fraction);
+  // The model is linear in n but for the phase boundaries' rounding: solve it
+  // without them, then step down while the rounded model is over the target.
+  const double per_n = double(plan_cost_main) * main_share + double(plan_cost_per_cv) * double(per_cv_fraction) +
+                       double(plan_cost_qat) * double(qat_fraction);
+  const double guess = (target / p + double(plan_cost_main) * double(step)) / per_n;
+  int64_t n = int64_t(std::min(guess, 1e9));
+  while (n > step + 1 && planned_seconds(step, n, p) > target) --n;
+  n = std::max(n, step + 1);
+  // The main phase must not have ended already: a replay with --iters n
+  // changes phase at the same step.
+  return std::max<int64_t>(n, int64_t(std::ceil(double(step + 1) / main_share)) + 1);
+}
+
 uint64_t TrainConfig::main_state_bytes() const {
   const uint64_t R = uint64_t(micro_res);
   uint64_t pyramid = 0;
@@ -107,7 +132,12 @@ void TrainConfig::validate() const {
         fit_box_steps, aabb_start);
   if (!(fit_box_margin >= 0.f)) fail("train config: fit_box_margin must not be negative");
   if (fit_box_max_blocks < 0) fail("train config: fit_box_max_blocks must not be negative (0: no limit)");
+  if (!(error_map_share >= 0.f && error_map_share < 1.f)) fail("train config: error_map_share must be in [0, 1)");
+  if (error_map_cell < 1 || error_map_cell > 4096) fail("train config: error_map_cell must be in [1, 4096] pixels");
   if (plan_step < 10) fail("train config: plan_step must be at least 10");
+  for (float c : {plan_cost_main, plan_cost_per_cv, plan_cost_qat})
+    if (!(c > 0.f && c <= 10.f)) fail("train config: plan_cost_main, _per_cv and _qat must be in (0, 10]");
+  if (!(plan_reserve >= 0.f && plan_reserve < 1.f)) fail("train config: plan_reserve must be in [0, 1)");
   if (!(per_cv_fraction >= 0.f && qat_fraction >= 0.f && per_cv_fraction + qat_fraction < 1.f))
     fail("train config: per_cv_fraction and qat_fraction must be >= 0 and sum to less than 1");
   if (batch_samples < 1024 || batch_samples > kMaxBatchSamples)
@@ -231,9 +261,16 @@ const std::map<std::string, Field>& fields() {
         }}},
       {"random_background", scalar(&TrainConfig::random_background)},
       {"pixel_jitter", scalar(&TrainConfig::pixel_jitter)},
+      {"error_map_share", scalar(&TrainConfig::error_map_share)},
+      {"error_map_cell", scalar(&TrainConfig::error_map_cell)},
+      {"error_map_unbiased", scalar(&TrainConfig::error_map_unbiased)},
       {"iters", scalar(&TrainConfig::iters)},
       {"minutes", scalar(&TrainConfig::minutes)},
       {"plan_step", scalar(&TrainConfig::plan_step)},
+      {"plan_cost_main", scalar(&TrainConfig::plan_cost_main)},
+      {"plan_cost_per_cv", scalar(&TrainConfig::plan_cost_per_cv)},
+      {"plan_cost_qat", scalar(&TrainConfig::plan_cost_qat)},
+      {"plan_reserve", scalar(&TrainConfig::plan_reserve)},
       {"fit_box_steps", scalar(&TrainConfig::fit_box_steps)},
       {"fit_box_margin", scalar(&TrainConfig::fit_box_margin)},
       {"fit_box_max_blocks", scalar(&TrainConfig::fit_box_max_blocks)},

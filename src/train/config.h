@@ -27,13 +27,34 @@ struct TrainConfig {
   float background[3] = {1.f, 1.f, 1.f};  // the background the model is exported for (and evaluated on)
   bool random_background = true;          // with RGBA images: composite each ray's target on a random colour
   bool pixel_jitter = false;              // training rays through a random point of their pixel, not its centre
+  // > 0: this share of each step's rays go through pixels drawn in proportion
+  // to an error map (every training image in cells of error_map_cell^2
+  // pixels, each cell the running mean squared error of the rays through it),
+  // the others through pixels drawn uniformly. With error_map_unbiased each
+  // ray's loss is weighted by its pixel's uniform probability over its actual
+  // one (the expected gradient stays that of uniform rays, with less noise
+  // where the error is); without, hard pixels simply count more.
+  float error_map_share = 0.f;
+  int error_map_cell = 16;
+  bool error_map_unbiased = true;
 
   // --- schedule ---
-  int64_t iters = 20000;          // total steps
-  double minutes = 0;             // > 0: choose iters to fit this budget (measured after a calibration)
-  int64_t plan_step = 1000;       // the learning rate holds until this step; --minutes fixes iters here (or
-                                  // earlier, once a quarter of the budget is spent) from the speed measured
-                                  // over the last 40 % of the steps, when empty space is already skipped
+  int64_t iters = 20000;     // total steps
+  double minutes = 0;        // > 0: choose iters to fit this budget (measured after a calibration)
+  int64_t plan_step = 1000;  // the learning rate holds until this step; --minutes fixes iters here (or
+                             // earlier, once a quarter of the budget is spent) from the speed measured
+                             // over the last 40 % of the steps, when empty space is already skipped
+  // --minutes: the time left at the plan goes to the steps by a model of
+  // their cost relative to the steps the plan measured (plan_iters below):
+  // a main-phase step after the plan costs plan_cost_main of them (the
+  // occupancy still tightens), a per-CV step plan_cost_per_cv (one level of
+  // 16 channels instead of four of 4), a quantization-aware step
+  // plan_cost_qat (rounding on top), and plan_reserve of the time left is
+  // kept for checkpoints and the export (docs/training.md, "The time budget").
+  float plan_cost_main = 0.9f;
+  float plan_cost_per_cv = 0.75f;
+  float plan_cost_qat = 1.05f;
+  float plan_reserve = 0.05f;
   float per_cv_fraction = 0.45f;  // share of steps training per-CV MLPs in float
   float qat_fraction = 0.1f;      // share of steps of quantization-aware training (last)
   int64_t batch_samples = 65536;  // target samples evaluated per step
@@ -126,6 +147,12 @@ struct TrainConfig {
   float delta() const { return step_micro * (scene_box.hi.x - scene_box.lo.x) / float(micro_res); }
   // The step at which the occupancy freezes (the main phase ends) for `n` steps.
   int64_t freeze_step(int64_t n) const;
+  // --minutes: the step count that fits `seconds_left` after `step` steps
+  // that took `seconds_per_step` each (the plan_cost_* model above), at
+  // least one more step and enough that the main phase is not over yet.
+  int64_t plan_iters(int64_t step, double seconds_per_step, double seconds_left) const;
+  // The model's seconds for steps `step`..`n` of a run of `n` steps.
+  double planned_seconds(int64_t step, int64_t n, double seconds_per_step) const;
   // Bytes of the main phase's state: the occupancy grid and the feature
   // pyramid with its two Adam moments.
   uint64_t main_state_bytes() const;

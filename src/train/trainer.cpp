@@ -68,6 +68,7 @@ Trainer::State::State(const Dataset& d, const TrainConfig& c)
     pixel_start.push_back(pixel_start.back() + uint64_t(f.image.width) * uint64_t(f.image.height));
   }
   iters = cfg.iters;
+  init_error_map();
 }
 
 void Trainer::State::fresh_init() {
@@ -127,6 +128,7 @@ void Trainer::State::do_step() {
   evaluate_color(b);
   lap(kColor);
   const double se = composite_rays(b, true);
+  update_error_map(b);
   if (phase == Phase::PerCv && !max_weight.empty())
     for (int32_t s : b.order) {
       const size_t cell = size_t(
@@ -333,6 +335,20 @@ bool Trainer::run(const TrainOptions& options) {
   };
   Phase last_phase = s.phase;
   bool line_open = false;
+  // Each phase's speed in this run, logged when it ends (a check of the
+  // plan_cost_* model), and the plan's expected end.
+  double planned_end = -1;
+  int64_t phase_step = s.step;
+  auto phase_time = t_start;
+  auto log_phase_time = [&](clock::time_point now) {
+    const double sec = std::chrono::duration<double>(now - phase_time).count();
+    const int64_t n = s.step - phase_step;
+    if (n > 0)
+      log(fmt::format("{} phase: {} steps in {:.1f} s ({:.4f} s per step)", phase_name(last_phase), n, sec,
+                      sec / double(n)));
+    phase_step = s.step;
+    phase_time = now;
+  };
   while (s.phase != Phase::Done) {
     if (options.stop_after >= 0 && s.step >= options.stop_after) break;
     if (options.interrupt && options.interrupt->load()) break;
@@ -345,20 +361,18 @@ bool Trainer::run(const TrainOptions& options) {
         const int64_t from = done * 6 / 10;
         const double per_step = (elapsed - step_seconds[size_t(from)]) / double(done - from);
         const double left = s.cfg.minutes * 60.0 - elapsed;
-        // Keep a tenth of the budget for the freeze, the slower final phases and the export.
-        int64_t n = s.step + std::max<int64_t>(1, int64_t(0.9 * left / std::max(per_step, 1e-6)));
-        // The main phase must not have ended already: a replay with --iters n
-        // changes phase at the same step.
-        const double main_share = 1.0 - double(s.cfg.per_cv_fraction) - double(s.cfg.qat_fraction);
-        n = std::max<int64_t>(n, int64_t(std::ceil(double(s.step + 1) / main_share)) + 1);
-        set_iters(n);
-        log(fmt::format("{:.3f} s per step over steps {}..{}: training for {} steps", per_step, s.step - (done - from),
-                        s.step, s.iters));
+        set_iters(s.cfg.plan_iters(s.step, per_step, left));
+        planned_end = elapsed + s.cfg.planned_seconds(s.step, s.iters, per_step);
+        log(
+            fmt::format("{:.3f} s per step over steps {}..{} ({:.1f} s in): training for {} steps, to end after "
+                        "about {:.1f} of {:.1f} minutes",
+                        per_step, s.step - (done - from), s.step, elapsed, s.iters, planned_end / 60.0, s.cfg.minutes));
       }
     }
     s.do_step();
     if (s.phase != last_phase) {
       if (line_open) std::fputc('\n', stderr), line_open = false;
+      log_phase_time(clock::now());
       log(fmt::format("step {}: {} phase ({} blocks, {} MLPs)", s.step, phase_name(s.phase),
                       s.phase == Phase::Main ? 0 : s.blocks.block_count(), s.mlp_cv.size()));
       last_phase = s.phase;
@@ -395,6 +409,10 @@ bool Trainer::run(const TrainOptions& options) {
     }
   }
   if (line_open) std::fputc('\n', stderr);
+  if (s.phase == Phase::Done && planned_end >= 0)
+    log(fmt::format("trained in {:.1f} minutes; the plan expected {:.1f} of the {:.1f}-minute budget",
+                    std::chrono::duration<double>(clock::now() - t_start).count() / 60.0, planned_end / 60.0,
+                    s.cfg.minutes));
   if (s.phase != Phase::Done) {
     write_checkpoint();
     return false;

@@ -174,6 +174,7 @@ std::vector<uint8_t> Trainer::State::save() const {
     w.put("max_weight", max_weight);
     w.put("float_blocks", float_blocks);
     w.put("float_mlps", float_mlps);
+    if (!err_map.empty()) w.put("error_map", err_map.values());
   };
   CheckpointWriter sizes(true);
   put_all(sizes);
@@ -311,6 +312,13 @@ void Trainer::State::load(const CheckpointReader& r) {
   if (!float_blocks.empty() || !float_mlps.empty()) {
     expect_size("float_blocks", float_blocks.size(), phase == Phase::Main ? 0 : blocks.values().size());
     expect_size("float_mlps", float_mlps.size(), mlp_params.size());
+  }
+  if (!err_map.empty()) {  // sized by init_error_map for this config and dataset
+    std::vector<float> e = r.get<float>("error_map");
+    expect_size("error_map", e.size(), err_map.cells());
+    for (size_t i = 0; i < e.size(); ++i)
+      if (!(e[i] >= 0.f && std::isfinite(e[i]))) bad("error map value", e[i]);
+    err_map.values() = std::move(e);
   }
 }
 

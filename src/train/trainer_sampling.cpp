@@ -100,35 +100,80 @@ void Trainer::State::resize_rays(Batch& b, int n) {
   b.ray_count.resize(size_t(n));
   b.pixel.resize(3 * size_t(n));
   b.ray_sq_err.resize(size_t(n));
+  b.ray_cell.resize(cfg.error_map_share > 0.f ? size_t(n) : 0);
+  b.ray_weight.resize(cfg.error_map_share > 0.f && cfg.error_map_unbiased ? size_t(n) : 0);
+}
+
+void Trainer::State::init_error_map() {
+  err_map = ErrorMap();
+  if (!(cfg.error_map_share > 0.f)) return;
+  std::vector<int> w, h;
+  for (const Frame& f : data.frames) {
+    w.push_back(f.image.width);
+    h.push_back(f.image.height);
+  }
+  // Every cell starts at the largest squared error of a pixel (1 per
+  // channel): unseen cells are drawn as often as the worst seen ones.
+  err_map = ErrorMap(w, h, cfg.error_map_cell, 1.f);
+}
+
+void Trainer::State::update_error_map(const Batch& b) {
+  if (err_map.empty()) return;
+  for (int i = 0; i < b.n_rays; ++i) err_map.update(b.ray_cell[size_t(i)], float(b.ray_sq_err[size_t(i)] / 3.0));
 }
 
 void Trainer::State::sample_training_rays(Batch& b, int n) {
   resize_rays(b, n);
   const uint64_t total = pixel_start.back();
   const uint64_t base = hash3(cfg.seed, uint64_t(RngStream::Rays), uint64_t(step));
-  // Ray i's pixel: its frame, x and y.
-  const auto pixel_of = [&](int i, size_t& f, int& x, int& y) {
-    const uint64_t px = hash_combine(base, uint64_t(i)) % total;
+  // With the error map, a share of the rays through pixels drawn from it.
+  const bool mapped = !err_map.empty();
+  if (mapped) err_map.rebuild();
+  const double share = cfg.error_map_share;
+  // Ray i's pixel: its frame, x and y (and with the map, its cell).
+  const auto pixel_of = [&](int i, size_t& f, int& x, int& y, uint32_t& cell) {
+    const uint64_t h = hash_combine(base, uint64_t(i));
+    if (mapped && err_map.total() > 0 && double(uniform01(hash_combine(h, 5))) < share) {
+      const MapPixel p = err_map.draw(double(uniform01(hash_combine(h, 6))), mix64(hash_combine(h, 7)));
+      f = p.frame;
+      x = p.x;
+      y = p.y;
+      cell = p.cell;
+      return;
+    }
+    const uint64_t px = h % total;
     f = size_t(std::upper_bound(pixel_start.begin(), pixel_start.end(), px) - pixel_start.begin()) - 1;
     const uint64_t local = px - pixel_start[f];
     const uint64_t w = uint64_t(data.frames[f].image.width);
     x = int(local % w);
     y = int(local / w);
+    if (mapped) cell = err_map.cell_of(uint32_t(f), x, y);
   };
   // The pixels lie anywhere in the images (a gigabyte for 100 RGBA frames of
   // 800 x 800): each is fetched this many rays ahead.
   constexpr int kAhead = 8;
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
+    uint32_t cell = 0;
     if (i + kAhead < n) {
       size_t fa;
       int xa, ya;
-      pixel_of(i + kAhead, fa, xa, ya);
+      pixel_of(i + kAhead, fa, xa, ya, cell);
       __builtin_prefetch(data.frames[fa].image.at(xa, ya));
     }
     size_t f;
     int x, y;
-    pixel_of(i, f, x, y);
+    pixel_of(i, f, x, y, cell);
+    if (mapped) {
+      b.ray_cell[size_t(i)] = cell;
+      if (!b.ray_weight.empty()) {
+        // The pixel's uniform probability over its probability in the mixture.
+        const double p_uniform = 1.0 / double(total);
+        const double p_mix =
+            err_map.total() > 0 ? (1.0 - share) * p_uniform + share * err_map.probability(cell) : p_uniform;
+        b.ray_weight[size_t(i)] = float(p_uniform / p_mix);
+      }
+    }
     const Frame& fr = data.frames[f];
     const uint64_t h = mix64(hash_combine(base, uint64_t(i)));
     if (cfg.pixel_jitter)  // a point of the pixel's square, drawn apart from the background's colour
@@ -406,13 +451,14 @@ double Trainer::State::composite_rays(Batch& b, bool with_grad) const {
       }
       const float* bg = &b.background[3 * size_t(i)];
       const CompositeResult r = composite(raw.data(), rgb.data(), cnt, delta, bg);
+      const float wi = b.ray_weight.empty() ? 1.f : b.ray_weight[size_t(i)];
       double se = 0;
       float d_pixel[3];
       for (int c = 0; c < 3; ++c) {
         b.pixel[3 * size_t(i) + size_t(c)] = r.rgb[c];
         const float e = r.rgb[c] - b.target[3 * size_t(i) + size_t(c)];
         se += double(e) * double(e);
-        d_pixel[c] = 2.f * e * inv_n;
+        d_pixel[c] = 2.f * e * inv_n * wi;
       }
       b.ray_sq_err[size_t(i)] = se;
       if (!with_grad || cnt == 0) continue;
@@ -428,7 +474,7 @@ double Trainer::State::composite_rays(Batch& b, bool with_grad) const {
       if (dist_scale > 0.f) {
         t.resize(size_t(cnt));
         for (int j = 0; j < cnt; ++j) t[size_t(j)] = float(b.cand[size_t(b.order[size_t(first + j)])]) * interval;
-        distortion_backward(raw.data(), t.data(), cnt, delta, interval, dist_scale, d_raw.data());
+        distortion_backward(raw.data(), t.data(), cnt, delta, interval, dist_scale * wi, d_raw.data());
       }
       for (int j = 0; j < cnt; ++j) {
         const size_t s = size_t(b.order[size_t(first + j)]);

@@ -17,6 +17,7 @@
 #include "render/traversal.h"
 #include "train/adam.h"
 #include "train/checkpoint_io.h"
+#include "train/error_map.h"
 #include "train/feature_grid.h"
 #include "train/mlp_kernels.h"
 #include "train/occupancy.h"
@@ -46,6 +47,8 @@ struct Batch {
   std::vector<int32_t> order;                 // active sample ids, ray after ray, each in march order
   std::vector<float> pixel;                   // 3 per ray
   std::vector<double> ray_sq_err;
+  std::vector<uint32_t> ray_cell;  // each ray's error-map cell (error_map_share > 0)
+  std::vector<float> ray_weight;   // each ray's loss weight (empty: 1)
 
   size_t n_samples = 0;
   std::vector<float> pos;       // 3 per sample: micro-grid position
@@ -120,6 +123,8 @@ struct Trainer::State {
   int last_rays = 0;
   int64_t last_samples = 0;
 
+  ErrorMap err_map;  // cfg.error_map_share > 0; else empty
+
   FeaturePyramid pyramid;
   BlockFeatures blocks;
   OccupancyGrid occ;
@@ -173,6 +178,9 @@ struct Trainer::State {
   void set_ray(trainer_detail::Batch& b, int i, const Ray& r);
   void resize_rays(trainer_detail::Batch& b, int n);
   void sample_training_rays(trainer_detail::Batch& b, int n);
+  void init_error_map();
+  // Folds each ray's squared error into its error-map cell, ray by ray.
+  void update_error_map(const trainer_detail::Batch& b);
 
   // --- sampling (trainer_sampling.cpp) ---------------------------------------
 

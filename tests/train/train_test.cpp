@@ -141,6 +141,37 @@ TEST(Train, AStepCountFixedAtTheCalibrationStepReplaysExactly) {
   EXPECT_EQ(model_bytes(a, true), model_bytes(b, true));
 }
 
+TEST(Train, PlanSpreadsTheTimeLeftByEachPhasesCost) {
+  TrainConfig c;  // main 45 %, per-CV 45 %, quantization-aware 10 %
+  c.plan_cost_main = 0.9f;
+  c.plan_cost_per_cv = 0.75f;
+  c.plan_cost_qat = 1.1f;
+  c.plan_reserve = 0.05f;
+  // The model's time for a run of n steps after step 1000 at 0.05 s a step,
+  // summed phase by phase here.
+  const auto seconds = [&](int64_t n) {
+    // (The fractions are floats: 0.45f and 0.1f, not 0.45 and 0.1.)
+    const double main_share = 1.0 - double(c.per_cv_fraction) - double(c.qat_fraction);
+    const int64_t freeze = std::llround(main_share * double(n));
+    const int64_t qat = std::llround((1.0 - double(c.qat_fraction)) * double(n));
+    return 0.05 * (0.9 * double(freeze - 1000) + 0.75 * double(qat - freeze) + 1.1 * double(n - qat));
+  };
+  // 1600 s left, 1520 s after the reserve: about (1520 / 0.05 + 900) / 0.8525 steps.
+  const int64_t n = c.plan_iters(1000, 0.05, 1600.0);
+  EXPECT_NEAR(double(n), 36715.0, 3.0);
+  EXPECT_LE(seconds(n), 1520.0 * (1 + 1e-9));
+  EXPECT_GT(seconds(n + 2), 1520.0);
+  EXPECT_NEAR(c.planned_seconds(1000, n, 0.05), seconds(n), 1e-3);  // float costs; a step is 0.04 s
+  // Every phase at the measured cost and a tenth kept: the steps that fill
+  // nine tenths of the time left.
+  c.plan_cost_main = c.plan_cost_per_cv = c.plan_cost_qat = 1.f;
+  c.plan_reserve = 0.1f;
+  EXPECT_NEAR(double(c.plan_iters(1000, 0.05, 1600.0)), 1000.0 + 0.9 * 1600.0 / 0.05, 1.0);
+  // Too little time left: still enough steps that the main phase goes on
+  // past this step (45 % of n beyond 1001).
+  EXPECT_EQ(c.plan_iters(1000, 0.05, 1.0), int64_t(std::ceil(1001.0 / 0.45)) + 1);
+}
+
 TEST(Train, ResultDoesNotDependOnTheThreadCount) {
   const Dataset data = load("train");
   TrainOptions one, two;
