@@ -213,14 +213,14 @@ void InterpolateQ4(DT d, size_t N, const FastModel& fm, Scratch& s, const float*
     }
     if (kInt8 && xq) {
       // Clamped, then rounded (the bounds are integers: the same values),
-      // plus 128, 4 channels per word.
+      // plus kByteOffset, 4 channels per word.
       for (int h = 0; h < 2; ++h) {
         auto word = hn::Zero(di);
         for (int b = 0; b < 4; ++b) {
           const int k = 4 * h + b;
           hn::Vec<DT> v = hn::Mul(hn::Sub(acc[k], zp[k]), hn::Set(d, feature_in[c0 + k]));
           v = hn::Min(hn::Max(v, hn::Set(d, -128.f)), hn::Set(d, 127.f));
-          word = hn::Or(word, hn::ShiftLeftSame(hn::Add(RoundToInt(d, v), hn::Set(di, 128)), 8 * b));
+          word = hn::Or(word, ByteAt(RoundToInt(d, v), b));
         }
         hn::Store(word, di, xq + size_t(c0 / 4 + h) * N);
       }
@@ -284,8 +284,13 @@ void RunNetBytes(DT d, size_t N, const std::vector<FastLayer>& net, const float*
     const bool hidden = l + 1 < net.size();
     if (!packed) PackBytes(d, N, x, L.q_in, xq);
     const float* dir = l == 0 && split >= 0 ? dir_q : nullptr;
+    // A first layer's inputs are signed; later ones are ReLU outputs.
+    const bool first = l == 0;
     if (hidden && L.out % 4 == 0 && net[l + 1].q_in == L.out) {
-      DenseBytesHidden(d, N, xq, L, q, p + L.m, dir, lanes, xq_next);
+      if (first)
+        DenseBytesHidden<true>(d, N, xq, L, q, p + L.m, dir, lanes, xq_next);
+      else
+        DenseBytesHidden<false>(d, N, xq, L, q, p + L.m, dir, lanes, xq_next);
       std::swap(xq, xq_next);
       packed = true;
       continue;
@@ -296,10 +301,12 @@ void RunNetBytes(DT d, size_t N, const std::vector<FastLayer>& net, const float*
     e.lo = hidden ? 0.f : -32768.f;
     e.hi = hidden ? 127.f : 32767.f;
     if (dir) {
-      DenseBytes(d, N, xq, L, q, y, Epilogue());
+      DenseBytes<true>(d, N, xq, L, q, y, Epilogue());
       AddDirectionTerms(d, N, y, L.out, dir, lanes, e);
+    } else if (first) {
+      DenseBytes<true>(d, N, xq, L, q, y, e);
     } else {
-      DenseBytes(d, N, xq, L, q, y, e);
+      DenseBytes<false>(d, N, xq, L, q, y, e);
     }
     x = y;
     packed = false;
@@ -587,15 +594,15 @@ void EncodeDirections(const FastModel& fm, const float* dx, const float* dy, con
       freq *= 2.f;
     }
     if (int8 && !fm.quads.empty()) {
-      // The byte form's rows (fast_direction_rows): codes plus 128 as
-      // unsigned bytes, input 4 j + k in byte k of row D + j.
+      // The byte form's rows (fast_direction_rows): codes plus kByteOffset
+      // as bytes, input 4 j + k in byte k of row D + j.
       const hn::RebindToSigned<DF> di;
       const int D = fm.dir_dims;
       for (int j = 0; 4 * j < D; ++j) {
         auto u = hn::Zero(di);
         for (int k = 0; k < 4 && 4 * j + k < D; ++k) {
           const auto code = hn::ConvertTo(di, hn::LoadU(d, out + size_t(4 * j + k) * ray_stride + r));
-          u = hn::Or(u, hn::ShiftLeftSame(hn::Add(code, hn::Set(di, 128)), 8 * k));
+          u = hn::Or(u, ByteAt(code, k));
         }
         hn::StoreU(u, di, reinterpret_cast<int32_t*>(out + size_t(D + j) * ray_stride + r));
       }
@@ -604,6 +611,8 @@ void EncodeDirections(const FastModel& fm, const float* dx, const float* dy, con
 }
 
 int64_t Target() { return HWY_TARGET; }
+
+int32_t ByteFormOffset() { return kHaveDotBytes ? kByteOffset : -1; }
 
 }  // namespace HWY_NAMESPACE
 }  // namespace edrnr
@@ -615,6 +624,7 @@ namespace edrnr {
 HWY_EXPORT(EvalBatch);
 HWY_EXPORT(EncodeDirections);
 HWY_EXPORT(Target);
+HWY_EXPORT(ByteFormOffset);
 
 void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t n, const float* dir,
                      size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds) {
@@ -643,6 +653,8 @@ void fast_encode_directions(const FastModel& fm, const float* dx, const float* d
 }
 
 const char* fast_simd_target() { return hwy::TargetName(HWY_DYNAMIC_DISPATCH(Target)()); }
+
+int fast_byte_form_offset() { return HWY_DYNAMIC_DISPATCH(ByteFormOffset)(); }
 
 }  // namespace edrnr
 #endif

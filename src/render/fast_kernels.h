@@ -63,7 +63,7 @@ void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastSample* sample
 // encode_direction's values (Float), or those values as INT8 codes of step
 // 1/127 (Int8). Writes value d of ray r to out[d * ray_stride + r]; with the
 // byte form (FastModel::quads) also rows D + j, j < ceil(D / 4), of 32-bit
-// words in the floats' place (codes 4 j .. 4 j + 3 plus 128, one per byte),
+// words in the floats' place (codes 4 j .. 4 j + 3 plus fm.byte_offset, one per byte),
 // which only the kernels read: out holds fast_direction_rows(fm) rows.
 // n is a multiple of the vector length (16 floats covers every target).
 void fast_encode_directions(const FastModel& fm, const float* dx, const float* dy, const float* dz, size_t n,
@@ -71,5 +71,10 @@ void fast_encode_directions(const FastModel& fm, const float* dx, const float* d
 
 // The SIMD target the kernels dispatch to on this CPU (e.g. "AVX3_DL").
 const char* fast_simd_target();
+
+// What the dispatched kernels add to each input byte of the INT8 layers'
+// byte form (FastModel::byte_offset): 128 (AVX-512 VNNI), 0 (AVX2), or -1
+// when they have no byte form.
+int fast_byte_form_offset();
 
 }  // namespace edrnr

@@ -1,6 +1,6 @@
 // Highway kernels of the fast renderer's MLP layers (render/fast_kernels.cpp
 // includes this once per SIMD target): the dense layers in float lanes
-// (Dense), their INT8 byte form on AVX-512 VNNI (DenseBytes and the
+// (Dense), their INT8 byte form on AVX-512 VNNI and AVX2 (DenseBytes and the
 // packing of inputs and outputs, FastModel::quads), requantization and
 // the colour net's per-ray direction terms. Per-target include guard, as
 // Highway's -inl.h headers have it.
@@ -85,60 +85,125 @@ void Dense(DT d, size_t N, const float* X, int in, int i0, int i1, const float* 
   if (o < out) DenseBlock<1, kFma>(d, N, X, in, i0, i1, W, B, o, ACC, e);
 }
 
+#if HWY_TARGET == HWY_AVX3_DL || HWY_TARGET == HWY_AVX2
+constexpr bool kHaveDotBytes = true;
+#else
+constexpr bool kHaveDotBytes = false;
+#endif
 #if HWY_TARGET == HWY_AVX3_DL
-// acc plus, per 32-bit lane, the 4 products of u's unsigned bytes and the
-// signed bytes of the word *w, broadcast to every lane (VPDPBUSD of AVX-512
-// VNNI with a broadcast memory operand; the model has its byte form only
-// where the CPU has that instruction, see FastModel::quads).
+// VPDPBUSD multiplies unsigned bytes by signed ones: a layer's inputs are
+// packed plus 128 (and the bias words take 128 times the weights back out).
+constexpr int32_t kByteOffset = 128;
+#else
+// AVX2 multiplies with VPMADDUBSW, whose 16-bit pair sums must not
+// saturate: the inputs are packed as signed bytes, and a signed input's
+// sign moves to the weight (VPSIGNB), |x| <= 128 against |w| <= 127
+// (FastModel::byte_offset 0 packs no weight -128), or an input known to be
+// in [0, 127] meets the weight as it is: at most 2 * 128 * 127 per pair.
+constexpr int32_t kByteOffset = 0;
+#endif
+
+// Byte k of a byte-form word: the integer v (in [-128, 127]) plus
+// kByteOffset, masked to its byte (a negative v's sign bits must not reach
+// the bytes above when kByteOffset is 0).
+template <class VI>
+HWY_INLINE VI ByteAt(VI v, int k) {
+  const hn::DFromV<VI> di;
+  VI u = hn::Add(v, hn::Set(di, kByteOffset));
+  if constexpr (kByteOffset == 0) u = hn::And(u, hn::Set(di, 255));
+  return hn::ShiftLeftSame(u, 8 * k);
+}
+
+#if HWY_TARGET == HWY_AVX3_DL || HWY_TARGET == HWY_AVX2
+// One word of a layer's byte-form inputs as DotBytes takes it: u, the
+// packed bytes, and on AVX2 a, their absolute values (kSigned) or u.
 template <class V>
-HWY_INLINE V DotBytes(V acc, V u, const int32_t* w) {
+struct ByteInputs {
+  V u, a;
+};
+template <bool kSigned, class V>
+HWY_INLINE ByteInputs<V> PrepareBytes(V u) {
+  ByteInputs<V> x{u, u};
+#if HWY_TARGET == HWY_AVX2
+  if constexpr (kSigned) {
+    if constexpr (sizeof(u.raw) == 32)
+      x.a.raw = _mm256_abs_epi8(u.raw);
+    else
+      x.a.raw = _mm_abs_epi8(u.raw);
+  }
+#endif
+  return x;
+}
+
+// acc plus, per 32-bit lane, the 4 products of the input bytes and the
+// signed bytes of the word *w, broadcast to every lane: on AVX-512 VNNI one
+// VPDPBUSD with a broadcast memory operand; on AVX2 VPSIGNB (kSigned),
+// VPMADDUBSW, VPMADDWD by ones and VPADDD, the same exact sums.
+template <bool kSigned, class V>
+HWY_INLINE V DotBytes(V acc, const ByteInputs<V>& x, const int32_t* w) {
   auto r = acc.raw;
+#if HWY_TARGET == HWY_AVX3_DL
   if constexpr (sizeof(r) == 64)
-    asm("vpdpbusd %2%{1to16%}, %1, %0" : "+v"(r) : "v"(u.raw), "m"(*w));
+    asm("vpdpbusd %2%{1to16%}, %1, %0" : "+v"(r) : "v"(x.u.raw), "m"(*w));
   else
-    asm("vpdpbusd %2%{1to8%}, %1, %0" : "+v"(r) : "v"(u.raw), "m"(*w));
+    asm("vpdpbusd %2%{1to8%}, %1, %0" : "+v"(r) : "v"(x.u.raw), "m"(*w));
+#else
+  if constexpr (sizeof(r) == 32) {
+    __m256i wb = _mm256_set1_epi32(*w);
+    if constexpr (kSigned) wb = _mm256_sign_epi8(wb, x.u.raw);
+    r = _mm256_add_epi32(r, _mm256_madd_epi16(_mm256_maddubs_epi16(x.a.raw, wb), _mm256_set1_epi16(1)));
+  } else {
+    __m128i wb = _mm_set1_epi32(*w);
+    if constexpr (kSigned) wb = _mm_sign_epi8(wb, x.u.raw);
+    r = _mm_add_epi32(r, _mm_madd_epi16(_mm_maddubs_epi16(x.a.raw, wb), _mm_set1_epi16(1)));
+  }
+#endif
   acc.raw = r;
   return acc;
 }
-constexpr bool kHaveDotBytes = true;
 
 // round(v) as int32 lanes, v already within the int32 range (the conversion
 // rounds to nearest even, as hn::Round).
 template <class DT>
 HWY_INLINE hn::Vec<hn::RebindToSigned<DT>> RoundToInt(DT d, hn::Vec<DT> v) {
   hn::Vec<hn::RebindToSigned<DT>> r = hn::Zero(hn::RebindToSigned<DT>());
+#if HWY_TARGET == HWY_AVX3_DL
   if constexpr (sizeof(v.raw) == 64)
     r.raw = _mm512_cvtps_epi32(v.raw);
-  else if constexpr (sizeof(v.raw) == 32)
+  else
+#endif
+      if constexpr (sizeof(v.raw) == 32)
     r.raw = _mm256_cvtps_epi32(v.raw);
   else
-    r = hn::NearestInt(v);
+    r.raw = _mm_cvtps_epi32(v.raw);
   (void)d;
   return r;
 }
 
 // The sums bias + W X of outputs [o, o + NB) in the byte form: the inputs in
-// xq (4 per word, plus 128), the weight words wq, the bias words bq (which
-// take the 128 back out). Every sum is an exact integer, as in Dense<true>.
-template <int NB, class DI>
+// xq (4 per word, plus kByteOffset), the weight words wq, the bias words bq
+// (which take the offset back out). kSigned: inputs may be negative (a net's
+// first layer, the direction); otherwise they are in [0, 127]. Every sum is
+// an exact integer, as in Dense<true>.
+template <int NB, bool kSigned, class DI>
 HWY_INLINE void ByteSums(DI di, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq, int o,
                          hn::Vec<DI>* acc) {
   for (int k = 0; k < NB; ++k) acc[k] = hn::Set(di, bq[o + k]);
   for (int j = 0; j < words; ++j) {
-    const auto u = hn::Load(di, xq + size_t(j) * N);
-    for (int k = 0; k < NB; ++k) acc[k] = DotBytes(acc[k], u, wq + size_t(o + k) * size_t(words) + size_t(j));
+    const ByteInputs<hn::Vec<DI>> x = PrepareBytes<kSigned>(hn::Load(di, xq + size_t(j) * N));
+    for (int k = 0; k < NB; ++k) acc[k] = DotBytes<kSigned>(acc[k], x, wq + size_t(o + k) * size_t(words) + size_t(j));
   }
 }
 
 // DenseBlock in the byte form: ACC rows [o, o + NB) = epilogue(bias + W X),
 // row r at ACC + r * stride (N when 0): the results of DenseBlock<NB, true>.
-template <int NB, class DT>
+template <int NB, bool kSigned, class DT>
 HWY_INLINE void DenseBytesBlock(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq,
                                 int o, float* ACC, const Epilogue& e, size_t stride = 0) {
   if (stride == 0) stride = N;
   const hn::RebindToSigned<DT> di;
   hn::Vec<decltype(di)> acc[NB];
-  ByteSums<NB>(di, N, xq, words, wq, bq, o, acc);
+  ByteSums<NB, kSigned>(di, N, xq, words, wq, bq, o, acc);
   for (int k = 0; k < NB; ++k) {
     hn::Vec<DT> v = hn::ConvertTo(d, acc[k]);
     if (e.mult) {
@@ -151,21 +216,22 @@ HWY_INLINE void DenseBytesBlock(DT d, size_t N, const int32_t* xq, int words, co
 
 // A hidden layer's outputs [o, o + NB) (NB a multiple of 4) straight into
 // the next layer's byte form: clamp(round(mult (sum + dir)), 0, 127) plus
-// 128, 4 outputs per word of xq_out. dir (null: none): the colour net's
+// kByteOffset, 4 outputs per word of xq_out. dir (null: none): the colour net's
 // direction terms, output r's of the lanes' slots at dir[r * kDirRow]
 // picked by `lanes`. The values are those of DenseBytesBlock's epilogue (the
 // bounds are integers, so clamping before or after rounding is the same)
 // and of the next layer's packing (DenseBytes).
-template <int NB, class DT, class Idx>
+template <int NB, bool kSigned, class DT, class Idx>
 HWY_INLINE void DenseBytesToBytes(DT d, size_t N, const int32_t* xq, int words, const int32_t* wq, const int32_t* bq,
                                   int o, const float* mult, const float* dir, Idx lanes, int32_t* xq_out) {
   static_assert(NB % 4 == 0, "whole words");
   const hn::RebindToSigned<DT> di;
   hn::Vec<decltype(di)> acc[NB];
-  ByteSums<NB>(di, N, xq, words, wq, bq, o, acc);
+  ByteSums<NB, kSigned>(di, N, xq, words, wq, bq, o, acc);
   const hn::Vec<DT> lo = hn::Zero(d), hi = hn::Set(d, 127.f);
   for (int g = 0; g < NB; g += 4) {
-    hn::Vec<decltype(di)> word = hn::Set(di, int32_t(0x80808080u));  // the 128 of every byte (values below 128)
+    // The offset of every byte (the values are below 128).
+    hn::Vec<decltype(di)> word = hn::Set(di, kByteOffset == 128 ? int32_t(0x80808080u) : 0);
     for (int b = 0; b < 4; ++b) {
       const int k = g + b;
       hn::Vec<DT> v = hn::ConvertTo(d, acc[k]);
@@ -178,17 +244,14 @@ HWY_INLINE void DenseBytesToBytes(DT d, size_t N, const int32_t* xq, int words, 
 }
 
 // The byte form of input rows [0, rows) of X (integers in [-128, 127]): 4
-// per word, plus 128: ceil(rows / 4) rows of N words.
+// per word, plus kByteOffset: ceil(rows / 4) rows of N words.
 template <class DT>
 void PackBytes(DT d, size_t N, const float* X, int rows, int32_t* xq) {
   const hn::RebindToSigned<DT> di;
-  const auto offset = hn::Set(di, 128);
   for (int j = 0; 4 * j < rows; ++j) {
     auto u = hn::Zero(di);
-    for (int k = 0; k < 4 && 4 * j + k < rows; ++k) {
-      const auto x = hn::Add(hn::ConvertTo(di, hn::Load(d, X + size_t(4 * j + k) * N)), offset);
-      u = hn::Or(u, hn::ShiftLeftSame(x, 8 * k));
-    }
+    for (int k = 0; k < 4 && 4 * j + k < rows; ++k)
+      u = hn::Or(u, ByteAt(hn::ConvertTo(di, hn::Load(d, X + size_t(4 * j + k) * N)), k));
     hn::Store(u, di, xq + size_t(j) * N);
   }
 }
@@ -198,47 +261,46 @@ void PackBytes(DT d, size_t N, const float* X, int rows, int32_t* xq) {
 template <class DT>
 void PackBytesScaled(DT d, size_t N, const float* X, int rows, float m, int32_t* xq) {
   const hn::RebindToSigned<DT> di;
-  const auto offset = hn::Set(di, 128);
   const hn::Vec<DT> mv = hn::Set(d, m), lo = hn::Set(d, -128.f), hi = hn::Set(d, 127.f);
   for (int j = 0; 4 * j < rows; ++j) {
     auto u = hn::Zero(di);
     for (int k = 0; k < 4 && 4 * j + k < rows; ++k) {
       const hn::Vec<DT> v = hn::Min(hn::Max(hn::Mul(hn::Load(d, X + size_t(4 * j + k) * N), mv), lo), hi);
-      u = hn::Or(u, hn::ShiftLeftSame(hn::Add(RoundToInt(d, v), offset), 8 * k));
+      u = hn::Or(u, ByteAt(RoundToInt(d, v), k));
     }
     hn::Store(u, di, xq + size_t(j) * N);
   }
 }
 
 // Dense<true> over inputs [0, L.q_in), already in the byte form in xq (q:
-// the MLP's words), into rows of ACC.
-template <class DT>
+// the MLP's words), into rows of ACC. kSigned as in ByteSums.
+template <bool kSigned, class DT>
 void DenseBytes(DT d, size_t N, const int32_t* xq, const FastLayer& L, const int32_t* q, float* ACC,
                 const Epilogue& e) {
   const int words = (L.q_in + 3) / 4;
   const int32_t* wq = q + L.wq;
   const int32_t* bq = q + L.bq;
   int o = 0;
-  for (; o + 8 <= L.out; o += 8) DenseBytesBlock<8>(d, N, xq, words, wq, bq, o, ACC, e);
+  for (; o + 8 <= L.out; o += 8) DenseBytesBlock<8, kSigned>(d, N, xq, words, wq, bq, o, ACC, e);
   if (o + 4 <= L.out) {
-    DenseBytesBlock<4>(d, N, xq, words, wq, bq, o, ACC, e);
+    DenseBytesBlock<4, kSigned>(d, N, xq, words, wq, bq, o, ACC, e);
     o += 4;
   }
-  for (; o < L.out; ++o) DenseBytesBlock<1>(d, N, xq, words, wq, bq, o, ACC, e);
+  for (; o < L.out; ++o) DenseBytesBlock<1, kSigned>(d, N, xq, words, wq, bq, o, ACC, e);
 }
 
 // A hidden layer (L.out a multiple of 4) from the byte form in xq to the
 // next layer's byte form in xq_out (DenseBytesToBytes), with the direction
-// terms dir picked by lanes when dir is not null.
-template <class DT, class Idx>
+// terms dir picked by lanes when dir is not null. kSigned as in ByteSums.
+template <bool kSigned, class DT, class Idx>
 void DenseBytesHidden(DT d, size_t N, const int32_t* xq, const FastLayer& L, const int32_t* q, const float* mult,
                       const float* dir, Idx lanes, int32_t* xq_out) {
   const int words = (L.q_in + 3) / 4;
   const int32_t* wq = q + L.wq;
   const int32_t* bq = q + L.bq;
   int o = 0;
-  for (; o + 8 <= L.out; o += 8) DenseBytesToBytes<8>(d, N, xq, words, wq, bq, o, mult, dir, lanes, xq_out);
-  for (; o < L.out; o += 4) DenseBytesToBytes<4>(d, N, xq, words, wq, bq, o, mult, dir, lanes, xq_out);
+  for (; o + 8 <= L.out; o += 8) DenseBytesToBytes<8, kSigned>(d, N, xq, words, wq, bq, o, mult, dir, lanes, xq_out);
+  for (; o < L.out; o += 4) DenseBytesToBytes<4, kSigned>(d, N, xq, words, wq, bq, o, mult, dir, lanes, xq_out);
 }
 
 // DirectionParts' sums in the byte form: output o of the vector's slots at
@@ -256,11 +318,10 @@ void DirectionBytes(DT d, size_t N, const int32_t* xq, int words, const int32_t*
   e.lo = -std::numeric_limits<float>::infinity();
   e.hi = std::numeric_limits<float>::infinity();
   int o = 0;
-  for (; o + 4 <= out; o += 4) DenseBytesBlock<4>(d, N, xq, words, wq, bq, o, dir_q, e, kDirRow);
-  for (; o < out; ++o) DenseBytesBlock<1>(d, N, xq, words, wq, bq, o, dir_q, e, kDirRow);
+  for (; o + 4 <= out; o += 4) DenseBytesBlock<4, true>(d, N, xq, words, wq, bq, o, dir_q, e, kDirRow);
+  for (; o < out; ++o) DenseBytesBlock<1, true>(d, N, xq, words, wq, bq, o, dir_q, e, kDirRow);
 }
 #else
-constexpr bool kHaveDotBytes = false;
 template <class DT>
 HWY_INLINE hn::Vec<hn::RebindToSigned<DT>> RoundToInt(DT, hn::Vec<DT> v) {
   return hn::NearestInt(v);
@@ -269,9 +330,9 @@ template <class DT>
 void PackBytes(DT, size_t, const float*, int, int32_t*) {}
 template <class DT>
 void PackBytesScaled(DT, size_t, const float*, int, float, int32_t*) {}
-template <class DT>
+template <bool kSigned, class DT>
 void DenseBytes(DT, size_t, const int32_t*, const FastLayer&, const int32_t*, float*, const Epilogue&) {}
-template <class DT, class Idx>
+template <bool kSigned, class DT, class Idx>
 void DenseBytesHidden(DT, size_t, const int32_t*, const FastLayer&, const int32_t*, const float*, const float*, Idx,
                       int32_t*) {}
 template <class DT>

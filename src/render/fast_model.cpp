@@ -4,6 +4,7 @@
 
 #include "core/error.h"
 #include "model/mlp.h"
+#include "render/fast_kernels.h"
 
 namespace edrnr {
 namespace {
@@ -87,10 +88,13 @@ void pack_int8_net(const std::vector<DenseQ>& net, const std::vector<FastLayer>&
   }
 }
 
-// The byte form of the INT8 layers (FastModel::quads), or nothing when a
-// weight is not an integer in [-128, 127] or a bias is beyond 2^23 (then the
-// float form's sums could round, and the two forms would differ).
-void pack_quads(FastModel& fm, size_t mlps) {
+// The byte form of the INT8 layers (FastModel::quads) for inputs packed
+// plus `offset` (128 or 0, fast_byte_form_offset), or nothing when a weight
+// is not an integer in [-128, 127] ([-127, 127] for offset 0) or a bias is
+// beyond 2^23 (then the float form's sums could round, and the two forms
+// would differ).
+void pack_quads(FastModel& fm, size_t mlps, int offset_bytes) {
+  const float w_min = offset_bytes == 0 ? -127.f : -128.f;
   size_t offset = 0;
   for (std::vector<FastLayer>* net : {&fm.density, &fm.color})
     for (size_t l = 0; l < net->size(); ++l) {
@@ -114,14 +118,14 @@ void pack_quads(FastModel& fm, size_t mlps) {
     int32_t* q = quads.data() + i * stride;
     for (const std::vector<FastLayer>* net : {&fm.density, &fm.color})
       for (const FastLayer& L : *net) {
-        // Inputs [k0, k1) of output o as words at wq, minus 128 times their
-        // weights' sum returned; false if a weight is not a byte.
+        // Inputs [k0, k1) of output o as words at wq, their weights' sum
+        // returned; false if a weight is not a byte.
         auto pack = [&](int o, int k0, int k1, size_t wq, int64_t& sum) {
           const int words = (k1 - k0 + 3) / 4;
           sum = 0;
           for (int k = k0; k < k1; ++k) {
             const float w = p[L.w + size_t(o) * size_t(L.in) + size_t(k)];
-            if (!(w >= -128.f && w <= 127.f && w == std::nearbyint(w))) return false;
+            if (!(w >= w_min && w <= 127.f && w == std::nearbyint(w))) return false;
             sum += int64_t(w);
             const uint32_t byte = uint32_t(uint8_t(int8_t(w)));
             q[wq + size_t(o) * size_t(words) + size_t((k - k0) / 4)] |= int32_t(byte << (8 * ((k - k0) % 4)));
@@ -133,16 +137,17 @@ void pack_quads(FastModel& fm, size_t mlps) {
           if (!pack(o, 0, L.q_in, L.wq, sum)) return;
           const float b = p[L.b + size_t(o)];
           if (!(std::abs(b) <= float(1 << 23))) return;
-          q[L.bq + size_t(o)] = int32_t(b) - int32_t(128 * sum);
+          q[L.bq + size_t(o)] = int32_t(b) - int32_t(offset_bytes * sum);
           if (L.q_in < L.in) {
             if (!pack(o, L.q_in, L.in, L.dwq, sum)) return;
-            q[L.dbq + size_t(o)] = -int32_t(128 * sum);
+            q[L.dbq + size_t(o)] = -int32_t(offset_bytes * sum);
           }
         }
       }
   }
   fm.quad_stride = stride;
   fm.quads = std::move(quads);
+  fm.byte_offset = offset_bytes;
 }
 
 }  // namespace
@@ -218,9 +223,8 @@ FastModel pack_fast_model(const SceneModel& model, const ResolvedForm& form, Fas
       pack_float_net(model.mlps_f32[i].color, fm.color, p, i, "colour");
     }
   }
-#if defined(__x86_64__) || defined(__i386__)
-  if (int8 && __builtin_cpu_supports("avx512vnni")) pack_quads(fm, n);
-#endif
+  const int offset_bytes = fast_byte_form_offset();
+  if (int8 && offset_bytes >= 0) pack_quads(fm, n, offset_bytes);
   return fm;
 }
 

@@ -35,12 +35,12 @@ struct FastLayer {
   // Int8 byte form (FastModel::quads): the first q_in inputs (the colour
   // net's first layer: those before the direction), per output ceil(q_in / 4)
   // words of 4 signed weight bytes (input 4j + k in byte k) at wq, and per
-  // output at bq the bias minus 128 times the sum of those weights.
+  // output at bq the bias minus byte_offset times the sum of those weights.
   int q_in = 0;
   size_t wq = 0, bq = 0;
   // The colour net's first layer only: its direction inputs (from q_in on)
-  // the same way, per output ceil(D / 4) words at dwq and minus 128 times
-  // their weights' sum at dbq (no bias).
+  // the same way, per output ceil(D / 4) words at dwq and minus byte_offset
+  // times their weights' sum at dbq (no bias).
   size_t dwq = 0, dbq = 0;
 };
 
@@ -61,11 +61,13 @@ struct FastModel {
   // Per channel: float features are (code - zero_point) * scale.
   std::vector<float> feature_scale, feature_zero_point;
   // Int8: the layers in byte form (FastLayer::wq, bq) for kernels that
-  // multiply unsigned bytes (the inputs plus 128) by signed ones; empty when
-  // a weight or bias does not fit it or the CPU has no such instruction
-  // (AVX-512 VNNI): the float form is used then, with the same results.
+  // multiply the inputs, packed as bytes plus byte_offset, by signed weight
+  // bytes: 128 with AVX-512 VNNI (unsigned bytes), 0 with AVX2 (signed
+  // bytes; no weight -128). Empty when a weight or bias does not fit it or
+  // the CPU has neither: the float form is used then, with the same results.
   size_t quad_stride = 0;
   std::vector<int32_t> quads;
+  int byte_offset = 0;
 
   const float* mlp(size_t index) const { return params.data() + index * mlp_stride; }
   const int32_t* mlp_quads(size_t index) const { return quads.data() + index * quad_stride; }

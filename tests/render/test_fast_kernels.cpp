@@ -109,15 +109,12 @@ TEST(FastKernels, OutputsDoNotDependOnTheChunking) {
   }
 }
 
-// The INT8 layers' byte form (FastModel::quads: unsigned inputs plus 128
-// against signed weights, on CPUs with AVX-512 VNNI) gives every sample the
-// bits of the float form of the same integer sums. Where the CPU has no such
-// instruction the model has no byte form, and both runs are the float form.
-TEST(FastKernels, Int8ByteFormGivesTheFloatFormsOutputs) {
-  ProceduralOptions o;
-  o.micro_res = 64;
-  o.seed = 5;
-  const SceneModel m = make_procedural_model("several", procedural_shapes("several"), o);
+// The INT8 layers' byte form (FastModel::quads: inputs as bytes, plus 128
+// with AVX-512 VNNI or signed with AVX2, against signed weights) gives every
+// sample the bits of the float form of the same integer sums. Where the CPU
+// has neither the model has no byte form, and both runs are the float form.
+// expect_bytes: whether m has a byte form where the CPU has one.
+void expect_byte_form_matches_float_form(const SceneModel& m, bool expect_bytes = true) {
   const Batch batch = make_batch(m, 61);
   std::vector<float> dx(kRays), dy(kRays), dz(kRays);
   for (int r = 0; r < kRays; ++r) {
@@ -129,7 +126,9 @@ TEST(FastKernels, Int8ByteFormGivesTheFloatFormsOutputs) {
   const FastModel bytes = pack_fast_model(m, resolve_model_form(m, ModelForm::Quantized), FastArithmetic::Int8);
   FastModel floats = bytes;
   floats.quads.clear();
-  if (bytes.quads.empty()) GTEST_LOG_(INFO) << "no byte form on this CPU: both runs use the float form";
+  if (bytes.quads.empty()) GTEST_LOG_(INFO) << "no byte form: both runs use the float form";
+  EXPECT_EQ(bytes.quads.empty(), fast_byte_form_offset() < 0 || !expect_bytes);
+  if (!bytes.quads.empty()) EXPECT_EQ(bytes.byte_offset, fast_byte_form_offset());
   // The byte form holds each weight once, in order, 4 to a word.
   if (!bytes.quads.empty()) {
     const FastLayer& L = bytes.density.front();
@@ -149,7 +148,7 @@ TEST(FastKernels, Int8ByteFormGivesTheFloatFormsOutputs) {
         sum += int64_t(w);
         EXPECT_EQ(float(int8_t(uint32_t(q[C.dwq + size_t(o * words + k / 4)]) >> (8 * (k % 4)))), w) << o << " " << k;
       }
-      EXPECT_EQ(q[C.dbq + size_t(o)], -128 * sum) << o;
+      EXPECT_EQ(q[C.dbq + size_t(o)], -bytes.byte_offset * sum) << o;
     }
   }
   std::vector<float> dir(size_t(std::max(fast_direction_rows(bytes), 1)) * kRays);
@@ -176,6 +175,40 @@ TEST(FastKernels, Int8ByteFormGivesTheFloatFormsOutputs) {
     if (len == n) {
       EXPECT_GT(opaque, 0);  // the samples reach the nets' later layers with something to say
     }
+  }
+}
+
+TEST(FastKernels, Int8ByteFormGivesTheFloatFormsOutputs) {
+  ProceduralOptions o;
+  o.micro_res = 64;
+  o.seed = 5;
+  const SceneModel m = make_procedural_model("several", procedural_shapes("several"), o);
+  {
+    SCOPED_TRACE("procedural model");
+    expect_byte_form_matches_float_form(m);
+  }
+  // The byte form's limits: weights of +-127 and inputs scaled 64 times up,
+  // so that the first layers' inputs reach -128 and 127 and the hidden
+  // layers' 127 (the 16-bit pair sums of AVX2's form are largest there).
+  SceneModel extreme = m;
+  for (MlpQ& q : extreme.mlps_q8)
+    for (std::vector<DenseQ>* net : {&q.density, &q.color})
+      for (DenseQ& d : *net) {
+        for (size_t i = 0; i < d.w.size(); ++i)
+          d.w[i] = int8_t(i % 3 == 0 ? 127 : i % 3 == 1 ? -127 : int(i * 37 % 255) - 127);
+        d.in_scale /= 64.f;
+      }
+  {
+    SCOPED_TRACE("weights +-127, saturated inputs");
+    expect_byte_form_matches_float_form(extreme);
+  }
+  // A weight of -128 fits the form with inputs plus 128 (AVX-512 VNNI) but
+  // not AVX2's signed inputs, whose sign it would have to take: there the
+  // model has no byte form (and the float form gives the results).
+  extreme.mlps_q8.front().density.front().w.front() = -128;
+  {
+    SCOPED_TRACE("a weight -128");
+    expect_byte_form_matches_float_form(extreme, fast_byte_form_offset() == 128);
   }
 }
 
