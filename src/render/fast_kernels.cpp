@@ -204,11 +204,7 @@ void InterpolateQ4(DT d, size_t N, const FastModel& fm, Scratch& s, const float*
       const auto word = hn::Load(du, words + size_t(j) * N);
       for (int k = 0; k < 8; ++k) {
         const hn::Vec<DT> code = CodeValue(d, k == 0 ? word : hn::ShiftRightSame(word, 4 * k), mask);
-        if (kInt8) {
-          acc[k] = hn::MulAdd(w[j], code, acc[k]);
-        } else {  // the reference: (code - zero point) * scale, weighted, added in corner order
-          acc[k] = hn::Add(acc[k], hn::Mul(w[j], hn::Mul(hn::Sub(code, zp[k]), scale[k])));
-        }
+        acc[k] = hn::MulAdd(w[j], code, acc[k]);
       }
     }
     if (kInt8 && xq) {
@@ -231,6 +227,8 @@ void InterpolateQ4(DT d, size_t N, const FastModel& fm, Scratch& s, const float*
       if (kInt8) {
         v = hn::Round(hn::Mul(hn::Sub(v, zp[k]), hn::Set(d, feature_in[c0 + k])));
         v = hn::Min(hn::Max(v, hn::Set(d, -128.f)), hn::Set(d, 127.f));
+      } else {  // the weights sum to 1: (sum of w code - zero point) * scale
+        v = hn::Mul(hn::Sub(v, zp[k]), scale[k]);
       }
       hn::Store(v, d, X + size_t(c0 + k) * N);
     }
@@ -355,7 +353,7 @@ void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, c
       const auto lanes = hn::IndicesFromVec(d, hn::Load(di, slots));
       AddDirectionTerms(d, N, y, L.out, dir_q, lanes, e);
     } else {
-      Dense<kInt8>(d, N, x, L.in, 0, L.in, p + L.w, p + L.b, L.out, y, e);
+      Dense<true>(d, N, x, L.in, 0, L.in, p + L.w, p + L.b, L.out, y, e);
     }
     x = y;
   }
@@ -405,10 +403,14 @@ void DirectionParts(DT d, size_t N, const FastModel& fm, const float* p, const i
   }
 }
 
+// 1 / (1 + exp(-x)). Highway's Exp is defined up to 104 (beyond, its
+// result is not infinity), so -x is kept within +-87, where exp(-x) is
+// finite; beyond that the sigmoid is 0 or 1 to within 2^-125.
 template <class DT>
 hn::Vec<DT> Sigmoid(DT d, hn::Vec<DT> x) {
-  const hn::Vec<DT> one = hn::Set(d, 1.f);
-  return hn::Div(one, hn::Add(one, hn::Exp(d, hn::Neg(x))));
+  const hn::Vec<DT> one = hn::Set(d, 1.f), limit = hn::Set(d, 87.f);
+  const hn::Vec<DT> e = hn::Exp(d, hn::Min(hn::Max(hn::Neg(x), hn::Neg(limit)), limit));
+  return hn::Div(one, hn::Add(one, e));
 }
 
 template <bool kInt8, class DT>

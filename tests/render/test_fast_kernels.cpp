@@ -109,6 +109,41 @@ TEST(FastKernels, OutputsDoNotDependOnTheChunking) {
   }
 }
 
+// Colour outputs far beyond the sigmoid's range give 0 and 1, not NaN: raw
+// colours of -1e6 and +1e6 (float arithmetic) and the 16-bit raw limits
+// (-128 and 128, Int8) where exp(-raw) overflows.
+TEST(FastKernels, SaturatedColoursAreZeroAndOne) {
+  ProceduralOptions o;
+  o.micro_res = 64;
+  o.seed = 3;
+  SceneModel m = make_procedural_model("several", procedural_shapes("several"), o);
+  for (MlpQ& q : m.mlps_q8) {
+    DenseQ& last = q.color.back();
+    ASSERT_EQ(last.out, 3);
+    last.b[0] = -1e6f;
+    last.b[1] = 1e6f;
+  }
+  const Batch batch = make_batch(m, 40);
+  std::vector<float> dx(kRays, 0.f), dy(kRays, 0.f), dz(kRays, 1.f);
+  for (FastArithmetic a : {FastArithmetic::Int8, FastArithmetic::Float}) {
+    const FastModel fm = pack_fast_model(m, resolve_model_form(m, ModelForm::Quantized), a);
+    std::vector<float> dir(size_t(std::max(fast_direction_rows(fm), 1)) * kRays);
+    fast_encode_directions(fm, dx.data(), dy.data(), dz.data(), kRays, dir.data(), kRays);
+    const size_t n = batch.samples.size();
+    std::vector<uint32_t> order(n);
+    for (size_t i = 0; i < n; ++i) order[i] = uint32_t(i);
+    std::vector<FastSampleOut> out(n);
+    fast_eval_batch(fm, batch.mlp, batch.samples.data(), order.data(), n, dir.data(), kRays, 2.f / 64.f, out.data(),
+                    nullptr);
+    for (size_t i = 0; i < n; ++i) {
+      SCOPED_TRACE(testing::Message() << "int8 " << (a == FastArithmetic::Int8) << " sample " << i);
+      ASSERT_TRUE(out[i].rgb[0] >= 0.f && out[i].rgb[0] <= 1e-30f) << out[i].rgb[0];
+      ASSERT_EQ(out[i].rgb[1], 1.f);
+      ASSERT_TRUE(out[i].rgb[2] >= 0.f && out[i].rgb[2] <= 1.f) << out[i].rgb[2];
+    }
+  }
+}
+
 // The INT8 layers' byte form (FastModel::quads: inputs as bytes, plus 128
 // with AVX-512 VNNI or signed with AVX2, against signed weights) gives every
 // sample the bits of the float form of the same integer sums. Where the CPU
