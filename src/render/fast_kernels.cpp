@@ -49,14 +49,14 @@ struct Scratch {
   alignas(64) float fx[kCap], fy[kCap], fz[kCap];
   alignas(64) float out[5 * kCap];
   alignas(64) uint32_t vertex[kCap];
-  alignas(64) uint32_t ray[kCap];
-  // Int8: the sample's ray slot in dir_q is slot_base + slot[l]. A new slot
+  // The sample's ray slot in dir_q is slot_base + slot[l]. A new slot
   // starts at each change of ray along the batch, so the lanes of a vector
   // span fewer slots than there are lanes.
   alignas(64) int32_t slot[kCap];
   int32_t slot_base = 0;
-  // Int8: the direction part of the colour net's first layer per ray of a
-  // segment, in accumulator units: output o of slot j at dir_q[o * kDirRow + j].
+  // The direction part of the colour net's first layer per ray of a
+  // segment (Int8: in accumulator units): output o of slot j at
+  // dir_q[o * kDirRow + j].
   alignas(64) float dir_q[kFastMaxWidth * kDirRow];
   // Int8 byte form: a layer's inputs plus 128, 4 rows per word (xq2: the
   // next layer's, written by the layer before it).
@@ -327,7 +327,7 @@ void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, c
       return;
     }
   }
-  // Int8, split >= 0: dir_q points at the chunk's first slot, slots holds the
+  // split >= 0: dir_q points at the chunk's first slot, slots holds the
   // lanes' slots relative to it (each below the lane count).
   const float* x = in;
   for (size_t l = 0; l < net.size(); ++l) {
@@ -344,7 +344,7 @@ void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, c
     } else {
       e.relu = hidden;
     }
-    if (kInt8 && l == 0 && split >= 0) {
+    if (l == 0 && split >= 0) {
       // The inputs before `split` here; those from it on (the direction)
       // were summed per ray (DirectionParts): added by the sample's slot,
       // then the epilogue.
@@ -374,20 +374,20 @@ void GatherDirections(DT d, size_t N, const hn::TFromD<DT>* dir, size_t ray_stri
   }
 }
 
-// Int8: dir_q for `count` rays (slots 0..count-1, ray of slot j: rays[j]):
-// the colour net's first-layer products of the direction inputs, summed in
-// input order, brought to accumulator units with the multiplier dir_in and
+// dir_q for `count` rays (slots 0..count-1, ray of slot j: rays[j]): the
+// colour net's first-layer products of the direction inputs, summed in input
+// order; Int8: brought to accumulator units with the multiplier dir_in and
 // rounded (as the chip adds them to the other products).
-template <class DT>
+template <bool kInt8, class DT>
 void DirectionParts(DT d, size_t N, const FastModel& fm, const float* p, const int32_t* q, const float* dir,
                     size_t ray_stride, const uint32_t* rays, size_t count, Scratch& s) {
   const FastLayer& L = fm.color.front();
   const int G = fm.geo_width, D = fm.dir_dims;
-  const hn::Vec<DT> m = hn::Set(d, p[fm.dir_in]);
+  const hn::Vec<DT> m = hn::Set(d, kInt8 ? p[fm.dir_in] : 1.f);
   alignas(64) uint32_t lane_rays[kCap];
   for (size_t j0 = 0; j0 < count; j0 += N) {
     for (size_t l = 0; l < N; ++l) lane_rays[l] = rays[std::min(j0 + l, count - 1)];
-    if (kHaveDotBytes && q) {
+    if (kInt8 && kHaveDotBytes && q) {
       // The byte form: the rays' packed direction bytes (the rows after the
       // D values: fast_direction_rows) read as words, 4 inputs per product.
       const int words = (D + 3) / 4;
@@ -398,8 +398,10 @@ void DirectionParts(DT d, size_t N, const FastModel& fm, const float* p, const i
     }
     GatherDirections(d, N, dir, ray_stride, lane_rays, G, D, s.cin);
     Dense<true>(d, N, s.cin, L.in, G, L.in, p + L.w, nullptr, L.out, s.split);
-    for (int o = 0; o < L.out; ++o)
-      hn::Store(hn::Round(hn::Mul(hn::Load(d, s.split + size_t(o) * N), m)), d, s.dir_q + size_t(o) * kDirRow + j0);
+    for (int o = 0; o < L.out; ++o) {
+      const hn::Vec<DT> v = hn::Load(d, s.split + size_t(o) * N);
+      hn::Store(kInt8 ? hn::Round(hn::Mul(v, m)) : v, d, s.dir_q + size_t(o) * kDirRow + j0);
+    }
   }
 }
 
@@ -451,10 +453,9 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
   const hn::Vec<DT> trans = kInt8 ? hn::Sub(hn::Set(d, 1.f), alpha) : hn::Exp(d, hn::Neg(tau));
   hn::Store(alpha, d, s.out);
   hn::Store(trans, d, s.out + N);
-  // Float: the rays' direction inputs after the density outputs (Int8: in dir_q).
-  if (!kInt8) GatherDirections(d, N, dir, ray_stride, s.ray, G, D, s.cin);
-  RunNet<kInt8>(d, N, fm.color, p, q, s.cin, s.a, s.b, s.rgb, kInt8 && D > 0 ? G : -1, s.dir_q + s.slot_base, s.slot,
-                s.xq, s.xq2, bytes);
+  // The direction inputs' part of the colour net is in dir_q.
+  RunNet<kInt8>(d, N, fm.color, p, q, s.cin, s.a, s.b, s.rgb, D > 0 ? G : -1, s.dir_q + s.slot_base, s.slot, s.xq,
+                s.xq2, bytes);
   for (int c = 0; c < 3; ++c) {
     hn::Vec<DT> v = hn::Load(d, s.rgb + size_t(c) * N);
     if (kInt8) v = hn::Mul(v, hn::Set(d, 1.f / 256.f));
@@ -479,8 +480,7 @@ void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, const
     hn::Store(hn::LoadU(d, b.fy), d, s.fy);
     hn::Store(hn::LoadU(d, b.fz), d, s.fz);
     hn::Store(hn::LoadU(du, b.vertex), du, s.vertex);
-    hn::Store(hn::LoadU(du, b.ray), du, s.ray);
-    if (kInt8) hn::Store(hn::LoadU(di, slots), di, slot);
+    hn::Store(hn::LoadU(di, slots), di, slot);
   } else {  // the tail repeats the last sample
     for (size_t l = 0; l < N; ++l) {
       const size_t i = std::min(l, valid - 1);
@@ -488,12 +488,11 @@ void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, const
       s.fy[l] = b.fy[i];
       s.fz[l] = b.fz[i];
       s.vertex[l] = b.vertex[i];
-      s.ray[l] = b.ray[i];
-      slot[l] = kInt8 ? slots[i] : 0;
+      slot[l] = slots[i];
     }
   }
-  s.slot_base = kInt8 ? slot[0] : 0;
-  if (kInt8) hn::Store(hn::Sub(hn::Load(di, slot), hn::Set(di, s.slot_base)), di, s.slot);
+  s.slot_base = slot[0];
+  hn::Store(hn::Sub(hn::Load(di, slot), hn::Set(di, s.slot_base)), di, s.slot);
   EvalChunk<kInt8>(d, N, fm, p, q, dir, ray_stride, delta, s, seconds);
   for (size_t l = 0; l < valid; ++l) {
     FastSampleOut& o = out[b.order[l]];
@@ -523,7 +522,7 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t
   const size_t vertex_bytes = size_t(F) / 2;
   for (size_t i0 = 0; i0 < n; i0 += N) {
     const size_t valid = std::min(N, n - i0);
-    if (int8 && fm.dir_dims > 0 && i0 >= seg_end) {
+    if (fm.dir_dims > 0 && i0 >= seg_end) {
       seg_begin = i0;
       seg_end = std::min(n, i0 + kSegment);  // kSegment is a multiple of N: chunks do not cross segments
       // Without a branch per sample: each sample writes its ray at the next
@@ -538,7 +537,10 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t
         last = ray;
         seg_slot[i - i0] = int32_t(slots - 1);
       }
-      DirectionParts(d, N, fm, p, q, dir, ray_stride, seg_rays, slots, s);
+      if (int8)
+        DirectionParts<true>(d, N, fm, p, q, dir, ray_stride, seg_rays, slots, s);
+      else
+        DirectionParts<false>(d, N, fm, p, q, dir, ray_stride, seg_rays, slots, s);
     }
     // The next chunk's feature words (mostly in L3: the features are larger
     // than L2) are fetched while this chunk runs: per sample the four runs

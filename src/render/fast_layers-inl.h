@@ -351,14 +351,20 @@ void Requantize(DT d, size_t N, float* rows, int count, const float* mult, bool 
 
 // Rows [0, out) of y (a layer's sums without the direction inputs) plus
 // the direction terms of the lanes' slots (output o's at dir[o * kDirRow],
-// picked by lanes), then the epilogue e (mult, lo, hi), in place.
+// picked by lanes), then the epilogue e (mult, lo, hi; or ReLU), in place.
 template <class DT, class Idx>
 HWY_INLINE void AddDirectionTerms(DT d, size_t N, float* y, int out, const float* dir, Idx lanes, const Epilogue& e) {
   for (int o = 0; o < out; ++o) {
     float* r = y + size_t(o) * N;
     const hn::Vec<DT> t = hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o) * kDirRow), lanes);
-    const hn::Vec<DT> v = hn::Round(hn::Mul(hn::Add(hn::Load(d, r), t), hn::Set(d, e.mult[o])));
-    hn::Store(hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi)), d, r);
+    hn::Vec<DT> v = hn::Add(hn::Load(d, r), t);
+    if (e.mult) {
+      v = hn::Round(hn::Mul(v, hn::Set(d, e.mult[o])));
+      v = hn::Min(hn::Max(v, hn::Set(d, e.lo)), hn::Set(d, e.hi));
+    } else if (e.relu) {
+      v = hn::Max(v, hn::Zero(d));
+    }
+    hn::Store(v, d, r);
   }
 }
 
