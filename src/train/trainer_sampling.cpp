@@ -154,13 +154,14 @@ void Trainer::State::sample_training_rays(Batch& b, int n) {
   constexpr int kAhead = 8;
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
-    uint32_t cell = 0;
     if (i + kAhead < n) {
       size_t fa;
       int xa, ya;
-      pixel_of(i + kAhead, fa, xa, ya, cell);
+      uint32_t cell_ahead = 0;
+      pixel_of(i + kAhead, fa, xa, ya, cell_ahead);
       __builtin_prefetch(data.frames[fa].image.at(xa, ya));
     }
+    uint32_t cell = 0;
     size_t f;
     int x, y;
     pixel_of(i, f, x, y, cell);
