@@ -60,6 +60,31 @@ Batch make_batch(const SceneModel& m, size_t n) {
 
 uint32_t bits(float x) { return std::bit_cast<uint32_t>(x); }
 
+// A batch's direction table (the kRays rays' unit directions encoded for
+// fm) and its samples in order.
+struct BatchInputs {
+  std::vector<float> dir;
+  std::vector<uint32_t> order;
+};
+BatchInputs batch_inputs(const FastModel& fm, const Batch& batch, const std::vector<float>& dx,
+                         const std::vector<float>& dy, const std::vector<float>& dz) {
+  BatchInputs in;
+  in.dir.resize(size_t(std::max(fast_direction_rows(fm), 1)) * kRays);
+  fast_encode_directions(fm, dx.data(), dy.data(), dz.data(), kRays, in.dir.data(), kRays);
+  in.order.resize(batch.samples.size());
+  for (size_t i = 0; i < in.order.size(); ++i) in.order[i] = uint32_t(i);
+  return in;
+}
+
+// Samples [0, len) of the batch through fm's MLP (sample i's outputs at i).
+std::vector<FastSampleOut> eval(const FastModel& fm, const Batch& batch, const BatchInputs& in, size_t len,
+                                float delta) {
+  std::vector<FastSampleOut> out(batch.samples.size());
+  fast_eval_batch(fm, batch.mlp, batch.samples.data(), in.order.data(), len, in.dir.data(), kRays, delta, out.data(),
+                  nullptr);
+  return out;
+}
+
 // Every run of samples [start, start + len) evaluated as a batch of its own
 // (whose chunks, and short tails in half-width vectors, fall elsewhere) gives
 // each sample the outputs, bit for bit, it had in the whole batch. Int8 and
@@ -82,21 +107,16 @@ TEST(FastKernels, OutputsDoNotDependOnTheChunking) {
   const float delta = 2.f / 64.f;
   for (FastArithmetic a : {FastArithmetic::Int8, FastArithmetic::Float}) {
     const FastModel fm = pack_fast_model(m, resolve_model_form(m, ModelForm::Quantized), a);
-    std::vector<float> dir(size_t(std::max(fast_direction_rows(fm), 1)) * kRays);
-    fast_encode_directions(fm, dx.data(), dy.data(), dz.data(), kRays, dir.data(), kRays);
+    const BatchInputs in = batch_inputs(fm, batch, dx, dy, dz);
     const size_t n = batch.samples.size();
-    std::vector<uint32_t> order(n);
-    for (size_t i = 0; i < n; ++i) order[i] = uint32_t(i);
-    std::vector<FastSampleOut> whole(n);
-    fast_eval_batch(fm, batch.mlp, batch.samples.data(), order.data(), n, dir.data(), kRays, delta, whole.data(),
-                    nullptr);
+    const std::vector<FastSampleOut> whole = eval(fm, batch, in, n, delta);
     int distinct = 0;  // samples whose outputs differ from the first one's: the batch is not degenerate
     for (size_t i = 0; i < n; ++i) distinct += whole[i].alpha != whole[0].alpha || whole[i].rgb[0] != whole[0].rgb[0];
     EXPECT_GT(distinct, int(n) / 2);
     for (size_t start : {size_t(0), size_t(3), size_t(16), size_t(37)})
       for (size_t len = 1; len <= 17 && start + len <= n; ++len) {
         std::vector<FastSampleOut> part(n);
-        fast_eval_batch(fm, batch.mlp, batch.samples.data(), order.data() + start, len, dir.data(), kRays, delta,
+        fast_eval_batch(fm, batch.mlp, batch.samples.data(), in.order.data() + start, len, in.dir.data(), kRays, delta,
                         part.data(), nullptr);
         for (size_t i = start; i < start + len; ++i) {
           SCOPED_TRACE(testing::Message() << "int8 " << (a == FastArithmetic::Int8) << " start " << start << " len "
@@ -127,14 +147,8 @@ TEST(FastKernels, SaturatedColoursAreZeroAndOne) {
   std::vector<float> dx(kRays, 0.f), dy(kRays, 0.f), dz(kRays, 1.f);
   for (FastArithmetic a : {FastArithmetic::Int8, FastArithmetic::Float}) {
     const FastModel fm = pack_fast_model(m, resolve_model_form(m, ModelForm::Quantized), a);
-    std::vector<float> dir(size_t(std::max(fast_direction_rows(fm), 1)) * kRays);
-    fast_encode_directions(fm, dx.data(), dy.data(), dz.data(), kRays, dir.data(), kRays);
     const size_t n = batch.samples.size();
-    std::vector<uint32_t> order(n);
-    for (size_t i = 0; i < n; ++i) order[i] = uint32_t(i);
-    std::vector<FastSampleOut> out(n);
-    fast_eval_batch(fm, batch.mlp, batch.samples.data(), order.data(), n, dir.data(), kRays, 2.f / 64.f, out.data(),
-                    nullptr);
+    const std::vector<FastSampleOut> out = eval(fm, batch, batch_inputs(fm, batch, dx, dy, dz), n, 2.f / 64.f);
     for (size_t i = 0; i < n; ++i) {
       SCOPED_TRACE(testing::Message() << "int8 " << (a == FastArithmetic::Int8) << " sample " << i);
       ASSERT_TRUE(out[i].rgb[0] >= 0.f && out[i].rgb[0] <= 1e-30f) << out[i].rgb[0];
@@ -186,19 +200,12 @@ void expect_byte_form_matches_float_form(const SceneModel& m, bool expect_bytes 
       EXPECT_EQ(q[C.dbq + size_t(o)], -bytes.byte_offset * sum) << o;
     }
   }
-  std::vector<float> dir(size_t(std::max(fast_direction_rows(bytes), 1)) * kRays);
-  fast_encode_directions(bytes, dx.data(), dy.data(), dz.data(), kRays, dir.data(), kRays);
+  const BatchInputs in = batch_inputs(bytes, batch, dx, dy, dz);  // the byte form's rows too
   const size_t n = batch.samples.size();
-  std::vector<uint32_t> order(n);
-  for (size_t i = 0; i < n; ++i) order[i] = uint32_t(i);
   const float delta = 2.f / 64.f;
   // Whole batches and short ones (half-width vectors).
   for (size_t len : {n, size_t(5)}) {
-    std::vector<FastSampleOut> a(n), b(n);
-    fast_eval_batch(bytes, batch.mlp, batch.samples.data(), order.data(), len, dir.data(), kRays, delta, a.data(),
-                    nullptr);
-    fast_eval_batch(floats, batch.mlp, batch.samples.data(), order.data(), len, dir.data(), kRays, delta, b.data(),
-                    nullptr);
+    const std::vector<FastSampleOut> a = eval(bytes, batch, in, len, delta), b = eval(floats, batch, in, len, delta);
     int opaque = 0;
     for (size_t i = 0; i < len; ++i) {
       SCOPED_TRACE(testing::Message() << "len " << len << " sample " << i);
