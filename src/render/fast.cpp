@@ -24,8 +24,9 @@ constexpr int kTileRays = kTile * kTile;  // rays per packet (a multiple of ever
 // this many pixels: a fine voxel of lego spans about 6 pixels at 800x800.
 constexpr int kStartCell = 4;
 constexpr int kFirstRoundSamples = 4;  // samples a ray hands over in the first round
-constexpr int kMaxRoundSamples =
-    16;  // ... doubling each round up to this (16 at the step of half a micro voxel: 1 % less time than 8)
+// ... doubling each round up to this (16 at the step of half a micro voxel:
+// 1 % less time than 8).
+constexpr int kMaxRoundSamples = 16;
 // A ray whose transmittance is already below kDimTransmittance is likely to
 // end within a sample or two: it hands over at most kDimRoundSamples per
 // round, so fewer samples past its end run through an MLP.
