@@ -348,12 +348,12 @@ void RunNet(DT d, size_t N, const std::vector<FastLayer>& net, const float* p, c
       // The inputs before `split` here; those from it on (the direction)
       // were summed per ray (DirectionParts): added by the sample's slot,
       // then the epilogue.
-      Dense<true>(d, N, x, L.in, 0, split, p + L.w, p + L.b, L.out, y);
+      Dense(d, N, x, L.in, 0, split, p + L.w, p + L.b, L.out, y);
       const hn::RebindToSigned<DT> di;
       const auto lanes = hn::IndicesFromVec(d, hn::Load(di, slots));
       AddDirectionTerms(d, N, y, L.out, dir_q, lanes, e);
     } else {
-      Dense<true>(d, N, x, L.in, 0, L.in, p + L.w, p + L.b, L.out, y, e);
+      Dense(d, N, x, L.in, 0, L.in, p + L.w, p + L.b, L.out, y, e);
     }
     x = y;
   }
@@ -397,7 +397,7 @@ void DirectionParts(DT d, size_t N, const FastModel& fm, const float* p, const i
       continue;
     }
     GatherDirections(d, N, dir, ray_stride, lane_rays, G, D, s.cin);
-    Dense<true>(d, N, s.cin, L.in, G, L.in, p + L.w, nullptr, L.out, s.split);
+    Dense(d, N, s.cin, L.in, G, L.in, p + L.w, nullptr, L.out, s.split);
     for (int o = 0; o < L.out; ++o) {
       const hn::Vec<DT> v = hn::Load(d, s.split + size_t(o) * N);
       hn::Store(kInt8 ? hn::Round(hn::Mul(v, m)) : v, d, s.dir_q + size_t(o) * kDirRow + j0);
