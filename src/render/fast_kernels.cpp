@@ -19,6 +19,7 @@
 #include <hwy/cache_control.h>
 #include <hwy/contrib/math/math-inl.h>
 #include "render/fast_layers-inl.h"  // Dense, the byte form, Requantize (per target)
+#include "render/fast_fused-inl.h"   // the default MLP shape's chunk in registers (per target)
 // clang-format on
 
 HWY_BEFORE_NAMESPACE();
@@ -97,6 +98,8 @@ template <class DT>
 constexpr bool PairWordsInRegisters(DT d) {
 #if HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
   return hn::MaxLanes(d) == 16 || hn::MaxLanes(d) == 8;
+#elif HWY_TARGET == HWY_AVX2
+  return hn::MaxLanes(d) == 8;
 #else
   (void)d;
   return false;
@@ -105,7 +108,7 @@ constexpr bool PairWordsInRegisters(DT d) {
 template <class DT>
 HWY_INLINE void PairWords(DT d, const uint32_t* q4, const uint32_t* vertex, uint32_t offset, int p, size_t N,
                           uint32_t* words) {
-#if HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
+#if HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL || HWY_TARGET == HWY_AVX2
   auto at = [&](size_t l) {
     return _mm_loadu_si128(reinterpret_cast<const __m128i*>(q4 + size_t(vertex[l]) * 2 + offset));
   };
@@ -113,6 +116,7 @@ HWY_INLINE void PairWords(DT d, const uint32_t* q4, const uint32_t* vertex, uint
   uint32_t* b0 = words + size_t(2 * p + 1) * N;
   uint32_t* a1 = words + size_t(8 + 2 * p) * N;
   uint32_t* b1 = words + size_t(9 + 2 * p) * N;
+#if HWY_TARGET != HWY_AVX2
   if constexpr (hn::MaxLanes(d) == 16) {
     __m512i z[4];
     for (size_t q = 0; q < 4; ++q) {
@@ -127,7 +131,9 @@ HWY_INLINE void PairWords(DT d, const uint32_t* q4, const uint32_t* vertex, uint
     _mm512_store_si512(a1, _mm512_unpackhi_epi64(t0, t2));
     _mm512_store_si512(b0, _mm512_unpacklo_epi64(t1, t3));
     _mm512_store_si512(b1, _mm512_unpackhi_epi64(t1, t3));
-  } else if constexpr (hn::MaxLanes(d) == 8) {
+  } else
+#endif
+      if constexpr (hn::MaxLanes(d) == 8) {
     __m256i z[4];
     for (size_t q = 0; q < 4; ++q) z[q] = _mm256_inserti128_si256(_mm256_castsi128_si256(at(q)), at(q + 4), 1);
     const __m256i t0 = _mm256_unpacklo_epi32(z[0], z[1]), t1 = _mm256_unpackhi_epi32(z[0], z[1]);
@@ -405,19 +411,9 @@ void DirectionParts(DT d, size_t N, const FastModel& fm, const float* p, const i
   }
 }
 
-// 1 / (1 + exp(-x)). Highway's Exp is defined up to 104 (beyond, its
-// result is not infinity), so -x is kept within +-87, where exp(-x) is
-// finite; beyond that the sigmoid is 0 or 1 to within 2^-125.
-template <class DT>
-hn::Vec<DT> Sigmoid(DT d, hn::Vec<DT> x) {
-  const hn::Vec<DT> one = hn::Set(d, 1.f), limit = hn::Set(d, 87.f);
-  const hn::Vec<DT> e = hn::Exp(d, hn::Min(hn::Max(hn::Neg(x), hn::Neg(limit)), limit));
-  return hn::Div(one, hn::Add(one, e));
-}
-
 template <bool kInt8, class DT>
 void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_t* q, const float* dir,
-               size_t ray_stride, float delta, Scratch& s, FastKernelSeconds* seconds) {
+               size_t ray_stride, float delta, bool fused, Scratch& s, FastKernelSeconds* seconds) {
   Clock::time_point t0;
   if (seconds) t0 = Clock::now();
   const int F = fm.feature_channels, G = fm.geo_width, D = fm.dir_dims;
@@ -435,6 +431,11 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
   if (seconds) {
     t1 = Clock::now();
     seconds->interpolation += std::chrono::duration<double>(t1 - t0).count();
+  }
+  if (kInt8 && fused) {
+    FusedNets(d, N, fm, p, q, s.xq, s.dir_q + s.slot_base, s.slot, delta, s.out);
+    if (seconds) seconds->mlp += std::chrono::duration<double>(Clock::now() - t1).count();
+    return;
   }
 
   // Density net: its G outputs land in the first rows of the colour input.
@@ -468,7 +469,7 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
 // chunk's first sample on) in the lanes of d (the tail repeats the last
 // sample; Int8: slots[l] is lane l's slot in s.dir_q), their outputs to out.
 template <bool kInt8, class DT>
-void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, const FastBatch& b, size_t valid,
+void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, bool fused, const FastBatch& b, size_t valid,
               const int32_t* slots, const float* dir, size_t ray_stride, float delta, Scratch& s, FastSampleOut* out,
               FastKernelSeconds* seconds) {
   const size_t N = hn::Lanes(d);
@@ -493,7 +494,7 @@ void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, const
   }
   s.slot_base = slot[0];
   hn::Store(hn::Sub(hn::Load(di, slot), hn::Set(di, s.slot_base)), di, s.slot);
-  EvalChunk<kInt8>(d, N, fm, p, q, dir, ray_stride, delta, s, seconds);
+  EvalChunk<kInt8>(d, N, fm, p, q, dir, ray_stride, delta, fused, s, seconds);
   for (size_t l = 0; l < valid; ++l) {
     FastSampleOut& o = out[b.order[l]];
     o.alpha = s.out[l];
@@ -511,6 +512,7 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t
   const float* p = fm.mlp(mlp);
   const bool int8 = fm.arithmetic == FastArithmetic::Int8;
   const int32_t* q = int8 && !fm.quads.empty() ? fm.mlp_quads(mlp) : nullptr;
+  const bool fused = FusedShape(fm, q);  // the default MLP shape: FusedNets
   // Int8: per segment, the rays met (a new slot at each change of ray: a
   // ray's samples are consecutive) and their direction parts.
   alignas(64) uint32_t seg_rays[kSegment];
@@ -566,13 +568,13 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t
     b.order += i0;
     if (N >= 8 && valid <= hn::Lanes(dh)) {
       if (int8)
-        RunChunk<true>(dh, fm, p, q, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
+        RunChunk<true>(dh, fm, p, q, fused, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
       else
-        RunChunk<false>(dh, fm, p, q, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
+        RunChunk<false>(dh, fm, p, q, fused, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
     } else if (int8) {
-      RunChunk<true>(d, fm, p, q, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
+      RunChunk<true>(d, fm, p, q, fused, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
     } else {
-      RunChunk<false>(d, fm, p, q, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
+      RunChunk<false>(d, fm, p, q, fused, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
     }
   }
 }
@@ -618,6 +620,8 @@ int64_t Target() { return HWY_TARGET; }
 
 int32_t ByteFormOffset() { return kHaveDotBytes ? kByteOffset : -1; }
 
+bool FusedModel(const FastModel& fm) { return FusedShape(fm, fm.quads.empty() ? nullptr : fm.quads.data()); }
+
 }  // namespace HWY_NAMESPACE
 }  // namespace edrnr
 HWY_AFTER_NAMESPACE();
@@ -629,6 +633,7 @@ HWY_EXPORT(EvalBatch);
 HWY_EXPORT(EncodeDirections);
 HWY_EXPORT(Target);
 HWY_EXPORT(ByteFormOffset);
+HWY_EXPORT(FusedModel);
 
 void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t n, const float* dir,
                      size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds) {
@@ -659,6 +664,8 @@ void fast_encode_directions(const FastModel& fm, const float* dx, const float* d
 const char* fast_simd_target() { return hwy::TargetName(HWY_DYNAMIC_DISPATCH(Target)()); }
 
 int fast_byte_form_offset() { return HWY_DYNAMIC_DISPATCH(ByteFormOffset)(); }
+
+bool fast_fused_shape(const FastModel& fm) { return HWY_DYNAMIC_DISPATCH(FusedModel)(fm); }
 
 }  // namespace edrnr
 #endif

@@ -72,6 +72,12 @@ void fast_encode_directions(const FastModel& fm, const float* dx, const float* d
 // The SIMD target the kernels dispatch to on this CPU (e.g. "AVX3_DL").
 const char* fast_simd_target();
 
+// Whether the dispatched batch kernel runs fm's MLPs through its fused
+// chunk (the INT8 path's byte form for the default MLP shape, density
+// 16-16-8 and colour 8 + D -> 16 -> 3, with every size fixed when compiled)
+// rather than its general layers; both give the same bits.
+bool fast_fused_shape(const FastModel& fm);
+
 // What the dispatched kernels add to each input byte of the INT8 layers'
 // byte form (FastModel::byte_offset): 128 (AVX-512 VNNI), 0 (AVX2), or -1
 // when they have no byte form.

@@ -18,12 +18,23 @@
 #define EDRNR_RENDER_FAST_LAYERS_INL_H_
 #endif
 
+#include <hwy/contrib/math/math-inl.h>
 #include <hwy/highway.h>
 
 HWY_BEFORE_NAMESPACE();
 namespace edrnr {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
+
+// 1 / (1 + exp(-x)). Highway's Exp is defined up to 104 (beyond, its
+// result is not infinity), so -x is kept within +-87, where exp(-x) is
+// finite; beyond that the sigmoid is 0 or 1 to within 2^-125.
+template <class DT>
+hn::Vec<DT> Sigmoid(DT d, hn::Vec<DT> x) {
+  const hn::Vec<DT> one = hn::Set(d, 1.f), limit = hn::Set(d, 87.f);
+  const hn::Vec<DT> e = hn::Exp(d, hn::Min(hn::Max(hn::Neg(x), hn::Neg(limit)), limit));
+  return hn::Div(one, hn::Add(one, e));
+}
 
 // Room for the widest vector of any target.
 constexpr size_t kCap = HWY_MAX_BYTES / sizeof(float);

@@ -162,8 +162,10 @@ TEST(FastKernels, SaturatedColoursAreZeroAndOne) {
 // with AVX-512 VNNI or signed with AVX2, against signed weights) gives every
 // sample the bits of the float form of the same integer sums. Where the CPU
 // has neither the model has no byte form, and both runs are the float form.
-// expect_bytes: whether m has a byte form where the CPU has one.
-void expect_byte_form_matches_float_form(const SceneModel& m, bool expect_bytes = true) {
+// expect_bytes: whether m has a byte form where the CPU has one;
+// expect_fused: whether the byte form then runs in the fused chunk of the
+// default MLP shape (fast_fused_shape) rather than the general layers.
+void expect_byte_form_matches_float_form(const SceneModel& m, bool expect_bytes = true, bool expect_fused = true) {
   const Batch batch = make_batch(m, 61);
   std::vector<float> dx(kRays), dy(kRays), dz(kRays);
   for (int r = 0; r < kRays; ++r) {
@@ -178,6 +180,8 @@ void expect_byte_form_matches_float_form(const SceneModel& m, bool expect_bytes 
   if (bytes.quads.empty()) GTEST_LOG_(INFO) << "no byte form: both runs use the float form";
   EXPECT_EQ(bytes.quads.empty(), fast_byte_form_offset() < 0 || !expect_bytes);
   if (!bytes.quads.empty()) EXPECT_EQ(bytes.byte_offset, fast_byte_form_offset());
+  EXPECT_EQ(fast_fused_shape(bytes), !bytes.quads.empty() && expect_fused);
+  EXPECT_FALSE(fast_fused_shape(floats));
   // The byte form holds each weight once, in order, 4 to a word.
   if (!bytes.quads.empty()) {
     const FastLayer& L = bytes.density.front();
@@ -228,6 +232,14 @@ TEST(FastKernels, Int8ByteFormGivesTheFloatFormsOutputs) {
   {
     SCOPED_TRACE("procedural model");
     expect_byte_form_matches_float_form(m);
+  }
+  // Another shape (8 feature channels) takes the general layers.
+  {
+    ProceduralOptions o8 = o;
+    o8.feature_channels = 8;
+    SCOPED_TRACE("8 feature channels");
+    expect_byte_form_matches_float_form(make_procedural_model("several", procedural_shapes("several"), o8), true,
+                                        false);
   }
   // The byte form's limits: weights of +-127 and inputs scaled 64 times up,
   // so that the first layers' inputs reach -128 and 127 and the hidden

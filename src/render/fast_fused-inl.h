@@ -1,0 +1,159 @@
+// The fast renderer's INT8 chunk for the default MLP shape (density
+// 16-16-8, colour 8 + D -> 16 -> 3: model/mlp.h's defaults, every bundled
+// model's), in the byte form (fast_layers-inl.h), with every size known when
+// it is compiled: each layer's inputs and outputs stay in registers, and
+// there is no loop over layers, blocks or words at run time. The same
+// operations in the same order as the general path (RunNetBytes and
+// EvalChunk), so the same bits. Included once per SIMD target by
+// render/fast_kernels.cpp, after fast_layers-inl.h.
+#include <cstddef>
+#include <cstdint>
+
+#include "model/mlp.h"
+#include "render/fast_model.h"
+
+#if defined(EDRNR_RENDER_FAST_FUSED_INL_H_) == defined(HWY_TARGET_TOGGLE)
+#ifdef EDRNR_RENDER_FAST_FUSED_INL_H_
+#undef EDRNR_RENDER_FAST_FUSED_INL_H_
+#else
+#define EDRNR_RENDER_FAST_FUSED_INL_H_
+#endif
+
+#include <hwy/contrib/math/math-inl.h>
+#include <hwy/highway.h>
+
+HWY_BEFORE_NAMESPACE();
+namespace edrnr {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+// The shape the fused chunk is compiled for.
+constexpr int kFusedF = 16;  // features: the density net's inputs
+constexpr int kFusedH = 16;  // the density net's hidden width
+constexpr int kFusedG = 8;   // the density net's outputs (raw density first)
+constexpr int kFusedC = 16;  // the colour net's hidden width
+
+// Whether the fused chunk can run fm (with its byte form q, null when it has
+// none): the INT8 path with byte products and the shape above.
+inline bool FusedShape(const FastModel& fm, const int32_t* q) {
+  if (!kHaveDotBytes || q == nullptr || fm.arithmetic != FastArithmetic::Int8) return false;
+  if (fm.feature_channels != kFusedF || fm.geo_width != kFusedG || fm.dir_dims <= 0) return false;
+  if (fm.density.size() != 2 || fm.color.size() != 2) return false;
+  const FastLayer &d0 = fm.density[0], &d1 = fm.density[1], &c0 = fm.color[0], &c1 = fm.color[1];
+  return d0.q_in == kFusedF && d0.out == kFusedH && d1.q_in == kFusedH && d1.out == kFusedG && c0.q_in == kFusedG &&
+         c0.out == kFusedC && c1.q_in == kFusedC && c1.out == 3;
+}
+
+#if HWY_TARGET == HWY_AVX3_DL || HWY_TARGET == HWY_AVX2
+// acc[k] = bias + the byte products of outputs o + k (k < NB) with the
+// WORDS input words x (ByteSums with the inputs in registers).
+template <int NB, int WORDS, bool kSigned, class VI>
+HWY_INLINE void FusedSums(const ByteInputs<VI>* x, const int32_t* wq, const int32_t* bq, int o, VI* acc) {
+  const hn::DFromV<VI> di;
+  for (int k = 0; k < NB; ++k) acc[k] = hn::Set(di, bq[o + k]);
+  for (int j = 0; j < WORDS; ++j)
+    for (int k = 0; k < NB; ++k) acc[k] = DotBytes<kSigned>(acc[k], x[j], wq + (o + k) * WORDS + j);
+}
+
+// A hidden layer of OUT outputs (a multiple of 8) from WORDS input words to
+// OUT / 4 words of the next layer's byte form (DenseBytesToBytes): with
+// dir, the colour net's direction terms of the lanes' slots added first.
+template <int OUT, int WORDS, bool kSigned, class DT, class Idx>
+HWY_INLINE void FusedHidden(DT d, const ByteInputs<hn::Vec<hn::RebindToSigned<DT>>>* x, const int32_t* wq,
+                            const int32_t* bq, const float* mult, const float* dir, Idx lanes,
+                            hn::Vec<hn::RebindToSigned<DT>>* y) {
+  static_assert(OUT % 8 == 0, "blocks of 8 outputs");
+  const hn::RebindToSigned<DT> di;
+  const hn::Vec<DT> lo = hn::Zero(d), hi = hn::Set(d, 127.f);
+  for (int o = 0; o < OUT; o += 8) {
+    hn::Vec<decltype(di)> acc[8];
+    FusedSums<8, WORDS, kSigned>(x, wq, bq, o, acc);
+    for (int g = 0; g < 8; g += 4) {
+      hn::Vec<decltype(di)> word = hn::Set(di, kByteOffset == 128 ? int32_t(0x80808080u) : 0);
+      for (int b = 0; b < 4; ++b) {
+        const int k = g + b;
+        hn::Vec<DT> v = hn::ConvertTo(d, acc[k]);
+        if (dir) v = hn::Add(v, hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o + k) * kDirRow), lanes));
+        v = hn::Min(hn::Max(hn::Mul(v, hn::Set(d, mult[o + k])), lo), hi);
+        word = hn::Or(word, hn::ShiftLeftSame(RoundToInt(d, v), 8 * b));
+      }
+      y[(o + g) / 4] = word;
+    }
+  }
+}
+
+// A net's last layer of OUT outputs: raw outputs in 1/256 steps,
+// clamp(round(mult * sum), -32768, 32767) (DenseBytesBlock's epilogue).
+template <int OUT, int WORDS, class DT>
+HWY_INLINE void FusedLast(DT d, const ByteInputs<hn::Vec<hn::RebindToSigned<DT>>>* x, const int32_t* wq,
+                          const int32_t* bq, const float* mult, hn::Vec<DT>* y) {
+  hn::Vec<hn::RebindToSigned<DT>> acc[OUT];
+  FusedSums<OUT, WORDS, false>(x, wq, bq, 0, acc);
+  for (int k = 0; k < OUT; ++k) {
+    const hn::Vec<DT> v = hn::Round(hn::Mul(hn::ConvertTo(d, acc[k]), hn::Set(d, mult[k])));
+    y[k] = hn::Min(hn::Max(v, hn::Set(d, -32768.f)), hn::Set(d, 32767.f));
+  }
+}
+
+// The chunk's nets and activations (EvalChunk after the interpolation):
+// the density net's inputs in xq (kFusedF / 4 words of N lanes), the
+// direction terms at dir_q picked by the lane slots `slot` (relative to
+// dir_q); out rows 0..4 of N lanes: alpha, 1 - alpha, r, g, b.
+template <class DT>
+HWY_INLINE void FusedNets(DT d, size_t N, const FastModel& fm, const float* p, const int32_t* q, const int32_t* xq,
+                          const float* dir_q, const int32_t* slot, float delta, float* out) {
+  const hn::RebindToSigned<DT> di;
+  using VI = hn::Vec<decltype(di)>;
+  using VF = hn::Vec<DT>;
+  const FastLayer &d0 = fm.density[0], &d1 = fm.density[1], &c0 = fm.color[0], &c1 = fm.color[1];
+  const auto lanes = hn::IndicesFromVec(d, hn::Load(di, slot));
+
+  // Density net: features (signed) -> hidden (in [0, 127]) -> raw outputs.
+  ByteInputs<VI> x[kFusedF / 4];
+  for (int j = 0; j < kFusedF / 4; ++j) x[j] = PrepareBytes<true>(hn::Load(di, xq + size_t(j) * N));
+  VI h[kFusedH / 4];
+  FusedHidden<kFusedH, kFusedF / 4, true>(d, x, q + d0.wq, q + d0.bq, p + d0.m, nullptr, lanes, h);
+  ByteInputs<VI> hx[kFusedH / 4];
+  for (int j = 0; j < kFusedH / 4; ++j) hx[j] = PrepareBytes<false>(h[j]);
+  VF geo[kFusedG];
+  FusedLast<kFusedG, kFusedH / 4>(d, hx, q + d1.wq, q + d1.bq, p + d1.m, geo);
+
+  // Opacity from the raw density (1/256 steps).
+  const VF raw = hn::Mul(geo[0], hn::Set(d, 1.f / 256.f));
+  const VF sigma = hn::Exp(d, hn::Min(hn::Max(raw, hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
+  const VF alpha = hn::Neg(hn::Expm1(d, hn::Neg(hn::Mul(sigma, hn::Set(d, delta)))));
+  hn::Store(alpha, d, out);
+  hn::Store(hn::Sub(hn::Set(d, 1.f), alpha), d, out + N);
+
+  // Colour net: the density outputs requantized to its INT8 inputs
+  // (PackBytesScaled), plus the direction terms -> hidden -> raw colour.
+  ByteInputs<VI> cx[kFusedG / 4];
+  {
+    const VF m = hn::Set(d, p[fm.geo_in]), lo = hn::Set(d, -128.f), hi = hn::Set(d, 127.f);
+    for (int j = 0; j < kFusedG / 4; ++j) {
+      VI u = hn::Zero(di);
+      for (int k = 0; k < 4; ++k)
+        u = hn::Or(u, ByteAt(RoundToInt(d, hn::Min(hn::Max(hn::Mul(geo[4 * j + k], m), lo), hi)), k));
+      cx[j] = PrepareBytes<true>(u);
+    }
+  }
+  VI c[kFusedC / 4];
+  FusedHidden<kFusedC, kFusedG / 4, true>(d, cx, q + c0.wq, q + c0.bq, p + c0.m, dir_q, lanes, c);
+  ByteInputs<VI> chx[kFusedC / 4];
+  for (int j = 0; j < kFusedC / 4; ++j) chx[j] = PrepareBytes<false>(c[j]);
+  VF rgb[3];
+  FusedLast<3, kFusedC / 4>(d, chx, q + c1.wq, q + c1.bq, p + c1.m, rgb);
+  for (int k = 0; k < 3; ++k)
+    hn::Store(Sigmoid(d, hn::Mul(rgb[k], hn::Set(d, 1.f / 256.f))), d, out + size_t(2 + k) * N);
+}
+#else
+template <class DT>
+HWY_INLINE void FusedNets(DT, size_t, const FastModel&, const float*, const int32_t*, const int32_t*, const float*,
+                          const int32_t*, float, float*) {}
+#endif
+
+}  // namespace HWY_NAMESPACE
+}  // namespace edrnr
+HWY_AFTER_NAMESPACE();
+
+#endif  // EDRNR_RENDER_FAST_FUSED_INL_H_
