@@ -1,10 +1,10 @@
-// The fast renderer's INT8 chunk for the default MLP shape (density
-// 16-16-8, colour 8 + D -> 16 -> 3: model/mlp.h's defaults, every bundled
-// model's), in the byte form (fast_layers-inl.h), with every size known when
-// it is compiled: each layer's inputs and outputs stay in registers, and
+// The fast renderer's chunk for the default MLP shape (density 16-16-8,
+// colour 8 + D -> 16 -> 3: model/mlp.h's defaults, every bundled model's),
+// float path and INT8 path (in the byte form, fast_layers-inl.h), with every
+// size known when it is compiled: each layer's inputs and outputs stay in registers, and
 // there is no loop over layers, blocks or words at run time. The same
-// operations in the same order as the general path (RunNetBytes and
-// EvalChunk), so the same bits. Included once per SIMD target by
+// operations in the same order as the general path (RunNet, RunNetBytes
+// and EvalChunk), so the same bits. Included once per SIMD target by
 // render/fast_kernels.cpp, after fast_layers-inl.h.
 #include <cstddef>
 #include <cstdint>
@@ -33,15 +33,75 @@ constexpr int kFusedH = 16;  // the density net's hidden width
 constexpr int kFusedG = 8;   // the density net's outputs (raw density first)
 constexpr int kFusedC = 16;  // the colour net's hidden width
 
-// Whether the fused chunk can run fm (with its byte form q, null when it has
-// none): the INT8 path with byte products and the shape above.
-inline bool FusedShape(const FastModel& fm, const int32_t* q) {
-  if (!kHaveDotBytes || q == nullptr || fm.arithmetic != FastArithmetic::Int8) return false;
+// Whether fm's MLPs have the shape above.
+inline bool FusedArch(const FastModel& fm) {
   if (fm.feature_channels != kFusedF || fm.geo_width != kFusedG || fm.dir_dims <= 0) return false;
   if (fm.density.size() != 2 || fm.color.size() != 2) return false;
   const FastLayer &d0 = fm.density[0], &d1 = fm.density[1], &c0 = fm.color[0], &c1 = fm.color[1];
-  return d0.q_in == kFusedF && d0.out == kFusedH && d1.q_in == kFusedH && d1.out == kFusedG && c0.q_in == kFusedG &&
-         c0.out == kFusedC && c1.q_in == kFusedC && c1.out == 3;
+  return d0.in == kFusedF && d0.out == kFusedH && d1.in == kFusedH && d1.out == kFusedG &&
+         c0.in == kFusedG + fm.dir_dims && c0.out == kFusedC && c1.in == kFusedC && c1.out == 3;
+}
+
+// Whether the fused chunk can run fm (with its byte form q, null when it has
+// none): the float path (FusedNetsFloat), or the INT8 path with byte
+// products (FusedNets), for the shape above.
+inline bool FusedShape(const FastModel& fm, const int32_t* q) {
+  if (!fm.fused || !FusedArch(fm)) return false;
+  if (fm.arithmetic == FastArithmetic::Float) return true;
+  if (!kHaveDotBytes || q == nullptr) return false;
+  const FastLayer &d0 = fm.density[0], &d1 = fm.density[1], &c0 = fm.color[0], &c1 = fm.color[1];
+  return d0.q_in == kFusedF && d1.q_in == kFusedH && c0.q_in == kFusedG && c1.q_in == kFusedC;
+}
+
+// OUT outputs (a multiple of NB) of a float layer with IN inputs (row
+// stride `in` of W; inputs x[0, IN) in registers): bias + W x, one fused
+// multiply-add at a time in input order (DenseBlock), into y.
+template <int OUT, int IN, int NB, class DT>
+HWY_INLINE void FusedDense(DT d, const hn::Vec<DT>* x, const float* W, int in, const float* B, hn::Vec<DT>* y) {
+  static_assert(OUT % NB == 0, "whole blocks");
+  for (int o = 0; o < OUT; o += NB) {
+    hn::Vec<DT> acc[NB];
+    for (int k = 0; k < NB; ++k) acc[k] = hn::Set(d, B[o + k]);
+    for (int i = 0; i < IN; ++i)
+      for (int k = 0; k < NB; ++k) acc[k] = hn::MulAdd(hn::Set(d, W[(o + k) * in + i]), x[i], acc[k]);
+    for (int k = 0; k < NB; ++k) y[o + k] = acc[k];
+  }
+}
+
+// The float path's nets and activations (EvalChunk after the
+// interpolation): the features in rows of X (kFusedF rows of N lanes), the
+// colour net's direction terms at dir_q picked by the lane slots `slot`;
+// out rows 0..4: alpha, exp(-sigma delta), r, g, b.
+template <class DT>
+HWY_INLINE void FusedNetsFloat(DT d, size_t N, const FastModel& fm, const float* p, const float* X, const float* dir_q,
+                               const int32_t* slot, float delta, float* out) {
+  using VF = hn::Vec<DT>;
+  const hn::RebindToSigned<DT> di;
+  const FastLayer &d0 = fm.density[0], &d1 = fm.density[1], &c0 = fm.color[0], &c1 = fm.color[1];
+  const auto lanes = hn::IndicesFromVec(d, hn::Load(di, slot));
+  const VF zero = hn::Zero(d);
+  VF x[kFusedF];
+  for (int i = 0; i < kFusedF; ++i) x[i] = hn::Load(d, X + size_t(i) * N);
+  VF h[kFusedH];
+  FusedDense<kFusedH, kFusedF, 8>(d, x, p + d0.w, kFusedF, p + d0.b, h);
+  for (int k = 0; k < kFusedH; ++k) h[k] = hn::Max(h[k], zero);
+  VF geo[kFusedG];
+  FusedDense<kFusedG, kFusedH, 8>(d, h, p + d1.w, kFusedH, p + d1.b, geo);
+
+  const VF sigma = hn::Exp(d, hn::Min(hn::Max(geo[0], hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
+  const VF tau = hn::Mul(sigma, hn::Set(d, delta));
+  hn::Store(hn::Neg(hn::Expm1(d, hn::Neg(tau))), d, out);
+  hn::Store(hn::Exp(d, hn::Neg(tau)), d, out + N);
+
+  // The colour net's first layer over the density outputs, then each
+  // lane's direction terms (AddDirectionTerms) and ReLU.
+  VF c[kFusedC];
+  FusedDense<kFusedC, kFusedG, 8>(d, geo, p + c0.w, c0.in, p + c0.b, c);
+  for (int k = 0; k < kFusedC; ++k)
+    c[k] = hn::Max(hn::Add(c[k], hn::TableLookupLanes(hn::LoadU(d, dir_q + size_t(k) * kDirRow), lanes)), zero);
+  VF rgb[3];
+  FusedDense<3, kFusedC, 3>(d, c, p + c1.w, kFusedC, p + c1.b, rgb);
+  for (int k = 0; k < 3; ++k) hn::Store(Sigmoid(d, rgb[k]), d, out + size_t(2 + k) * N);
 }
 
 #if HWY_TARGET == HWY_AVX3_DL || HWY_TARGET == HWY_AVX2

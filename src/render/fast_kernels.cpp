@@ -432,8 +432,11 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
     t1 = Clock::now();
     seconds->interpolation += std::chrono::duration<double>(t1 - t0).count();
   }
-  if (kInt8 && fused) {
-    FusedNets(d, N, fm, p, q, s.xq, s.dir_q + s.slot_base, s.slot, delta, s.out);
+  if (fused) {
+    if (kInt8)
+      FusedNets(d, N, fm, p, q, s.xq, s.dir_q + s.slot_base, s.slot, delta, s.out);
+    else
+      FusedNetsFloat(d, N, fm, p, s.a, s.dir_q + s.slot_base, s.slot, delta, s.out);
     if (seconds) seconds->mlp += std::chrono::duration<double>(Clock::now() - t1).count();
     return;
   }

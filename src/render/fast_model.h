@@ -69,6 +69,11 @@ struct FastModel {
   std::vector<int32_t> quads;
   int byte_offset = 0;
 
+  // Whether the kernels may run the default MLP shape's fused chunk
+  // (fast_fused_shape); false: always the general layers, which give the
+  // same bits (tests compare the two).
+  bool fused = true;
+
   const float* mlp(size_t index) const { return params.data() + index * mlp_stride; }
   const int32_t* mlp_quads(size_t index) const { return quads.data() + index * quad_stride; }
 };

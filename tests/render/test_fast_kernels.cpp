@@ -129,6 +129,47 @@ TEST(FastKernels, OutputsDoNotDependOnTheChunking) {
   }
 }
 
+// The fused chunk of the default MLP shape (sizes fixed when compiled)
+// gives every sample the bits of the general layers, on both paths, in
+// whole and half-width vectors.
+TEST(FastKernels, FusedChunkGivesTheGeneralLayersBits) {
+  ProceduralOptions o;
+  o.micro_res = 64;
+  o.seed = 11;
+  const SceneModel m = make_procedural_model("several", procedural_shapes("several"), o);
+  const Batch batch = make_batch(m, 45);
+  std::vector<float> dx(kRays), dy(kRays), dz(kRays);
+  for (int r = 0; r < kRays; ++r) {
+    const double a = 0.05 * r - 0.4, b = 0.025 * r - 1.2;
+    dx[size_t(r)] = float(std::cos(a) * std::cos(b));
+    dy[size_t(r)] = float(std::sin(a) * std::cos(b));
+    dz[size_t(r)] = float(std::sin(b));
+  }
+  const float delta = 2.f / 64.f;
+  for (FastArithmetic a : {FastArithmetic::Int8, FastArithmetic::Float}) {
+    SCOPED_TRACE(testing::Message() << "int8 " << (a == FastArithmetic::Int8));
+    const FastModel fused = pack_fast_model(m, resolve_model_form(m, ModelForm::Quantized), a);
+    FastModel general = fused;
+    general.fused = false;
+    // The float path always fuses this shape; the INT8 path where the CPU has byte products.
+    EXPECT_EQ(fast_fused_shape(fused), a == FastArithmetic::Float || !fused.quads.empty());
+    EXPECT_FALSE(fast_fused_shape(general));
+    const BatchInputs in = batch_inputs(fused, batch, dx, dy, dz);
+    for (size_t len : {batch.samples.size(), size_t(6)}) {
+      const std::vector<FastSampleOut> x = eval(fused, batch, in, len, delta), y = eval(general, batch, in, len, delta);
+      int opaque = 0;
+      for (size_t i = 0; i < len; ++i) {
+        SCOPED_TRACE(testing::Message() << "len " << len << " sample " << i);
+        ASSERT_EQ(bits(x[i].alpha), bits(y[i].alpha));
+        ASSERT_EQ(bits(x[i].trans), bits(y[i].trans));
+        for (int c = 0; c < 3; ++c) ASSERT_EQ(bits(x[i].rgb[c]), bits(y[i].rgb[c]));
+        opaque += x[i].alpha > 0.01f;
+      }
+      if (len > 6) EXPECT_GT(opaque, 0);  // the later layers see something
+    }
+  }
+}
+
 // Colour outputs far beyond the sigmoid's range give 0 and 1, not NaN: raw
 // colours of -1e6 and +1e6 (float arithmetic) and the 16-bit raw limits
 // (-128 and 128, Int8) where exp(-raw) overflows.
