@@ -2,6 +2,7 @@
 // set-up's is in fast_setup_kernels.cpp); compiled once per SIMD target
 // (hwy/foreach_target.h) and picked at run time (HWY_DYNAMIC_DISPATCH).
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cstring>
 
@@ -40,6 +41,41 @@ HWY_INLINE bool Occupied(const Vec3i& v, const Grid& g) {
   const int bit = (v.x & 3) + 4 * (v.y & 3) + 16 * (v.z & 1);
   return (g.words[word] >> bit) & 1u;
 }
+
+// The lanes' float values truncated to int32, for values that fit it (the
+// lanes that matter lie in the grid; the others are masked afterwards):
+// one conversion on x86, without the fix-up of out-of-range lanes that
+// hn::ConvertTo adds there.
+template <class DI, class VF>
+HWY_INLINE hn::Vec<DI> TruncInRange(DI di, VF v) {
+#if HWY_TARGET == HWY_AVX2 || HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
+  hn::Vec<DI> r = hn::Zero(di);
+  if constexpr (sizeof(v.raw) == 64)
+    r.raw = _mm512_cvttps_epi32(v.raw);
+  else if constexpr (sizeof(v.raw) == 32)
+    r.raw = _mm256_cvttps_epi32(v.raw);
+  else
+    r.raw = _mm_cvttps_epi32(v.raw);
+  return r;
+#else
+  return hn::ConvertTo(di, v);
+#endif
+}
+
+#if HWY_TARGET == HWY_AVX2
+// For each 8-bit mask, the indices of its set bits in order, 4 bits each
+// (lane i's source in nibble i): a compress of 8 lanes as one permutation.
+constexpr std::array<uint32_t, 256> CompressTable() {
+  std::array<uint32_t, 256> t{};
+  for (uint32_t m = 0; m < 256; ++m) {
+    int n = 0;
+    for (uint32_t i = 0; i < 8; ++i)
+      if ((m >> i) & 1) t[m] |= i << (4 * n++);
+  }
+  return t;
+}
+constexpr std::array<uint32_t, 256> kCompressTable = CompressTable();
+#endif
 
 // Bit i set iff candidate k + i (i < count <= Lanes) is a sample: its point
 // p_k (the reference's float operations, lane by lane) lies in the grid and
@@ -82,9 +118,9 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
               hn::And(hn::Ge(pz, zero), hn::Le(pz, hi)));
   const auto inside = hn::And(hn::RebindMask(di, inside_f), hn::Lt(lane, hn::Set(di, count)));
   const auto top = hn::Set(di, g.micro_res - 1);
-  const auto vx = hn::Min(hn::ConvertTo(di, px), top);
-  const auto vy = hn::Min(hn::ConvertTo(di, py), top);
-  const auto vz = hn::Min(hn::ConvertTo(di, pz), top);
+  const auto vx = hn::Min(TruncInRange(di, px), top);
+  const auto vy = hn::Min(TruncInRange(di, py), top);
+  const auto vz = hn::Min(TruncInRange(di, pz), top);
   const auto fr = hn::Set(di, g.fine_res);
   const auto fine =
       hn::Add(hn::ShiftRight<2>(vx), hn::Mul(fr, hn::Add(hn::ShiftRight<2>(vy), hn::Mul(fr, hn::ShiftRight<2>(vz)))));
@@ -111,8 +147,9 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
   const auto vertex =
       hn::Add(hn::And(vx, three), hn::Mul(five, hn::Add(hn::And(vy, three), hn::Mul(five, hn::And(vz, three)))));
   // The samples' lanes packed to the front, in order: one compress per
-  // vector where AVX-512 has it as an instruction, lane by lane elsewhere
-  // (other targets emulate it at far greater cost).
+  // vector where AVX-512 has it as an instruction, one permutation from a
+  // table on AVX2, lane by lane elsewhere (other targets emulate it at far
+  // greater cost).
 #if HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
   {
     const auto m = hn::RebindMask(di, samples);
@@ -122,6 +159,17 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
     hn::StoreU(hn::Compress(fz, mf), df, st.found_f[2]);
     hn::StoreU(hn::Compress(fine, m), di, st.found_fine);
     hn::StoreU(hn::Compress(vertex, m), di, st.found_vertex);
+  }
+#elif HWY_TARGET == HWY_AVX2
+  {
+    static_assert(hn::MaxLanes(DF()) == 8, "8 lanes on AVX2");
+    const __m256i idx = _mm256_srlv_epi32(_mm256_set1_epi32(int32_t(kCompressTable[bits])),
+                                          _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28));
+    _mm256_storeu_ps(st.found_f[0], _mm256_permutevar8x32_ps(fx.raw, idx));
+    _mm256_storeu_ps(st.found_f[1], _mm256_permutevar8x32_ps(fy.raw, idx));
+    _mm256_storeu_ps(st.found_f[2], _mm256_permutevar8x32_ps(fz.raw, idx));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(st.found_fine), _mm256_permutevar8x32_epi32(fine.raw, idx));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(st.found_vertex), _mm256_permutevar8x32_epi32(vertex.raw, idx));
   }
 #else
   {
