@@ -145,6 +145,7 @@ class TileRenderer {
     start_ =
         tile_start_distances(m_, skip_, camera_, kStartCell, cells_x_, (camera.height + kStartCell - 1) / kStartCell);
     delta_ = sample_spacing(m_, s.step_micro);
+    tables_ = fast_activation_tables(fm_, delta_);
     transmittance_min_ = std::max(s.transmittance_min, s.fast_transmittance_min);
     aabb_ = {m_.object_aabb.lo.cast<double>(), m_.object_aabb.hi.cast<double>()};
   }
@@ -235,7 +236,7 @@ class TileRenderer {
           const FastBatch batch{w.batch_ray.data() + f, w.batch_vertex.data() + f, w.batch_fx.data() + f,
                                 w.batch_fy.data() + f,  w.batch_fz.data() + f,     w.order.data() + f};
           fast_eval_batch(fm_, u, batch, w.count[u], w.dir.data(), kTileRays, delta_, w.outs.data(),
-                          profile_ ? &kernel : nullptr);
+                          profile_ ? &kernel : nullptr, &tables_);
           tot.profile.mlp_samples += w.count[u];
           w.count[u] = 0;
         }
@@ -381,6 +382,7 @@ class TileRenderer {
   Image& image_;
   bool profile_;
   float delta_ = 0;
+  FastActivationTables tables_;  // the INT8 path's activations for delta_
   float transmittance_min_ = 0;  // the rays' end (RenderSettings::fast_transmittance_min)
   int cells_x_ = 0;
   std::vector<double> start_;  // per cell of kStartCell pixels, row by row: where its rays may start

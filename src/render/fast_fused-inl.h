@@ -107,6 +107,26 @@ HWY_INLINE void FusedNetsFloat(DT d, size_t N, const FastModel& fm, const float*
   for (int k = 0; k < 3; ++k) hn::Store(Sigmoid(d, rgb[k]), d, out + size_t(2 + k) * N);
 }
 
+// The INT8 path's activations of raw outputs (integers in 1/256 steps):
+// alpha of the raw density for sample spacing delta, and the colour.
+template <class DT>
+HWY_INLINE hn::Vec<DT> AlphaOfRaw(DT d, hn::Vec<DT> raw_q, float delta) {
+  const hn::Vec<DT> raw = hn::Mul(raw_q, hn::Set(d, 1.f / 256.f));
+  const hn::Vec<DT> sigma = hn::Exp(d, hn::Min(hn::Max(raw, hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
+  return hn::Neg(hn::Expm1(d, hn::Neg(hn::Mul(sigma, hn::Set(d, delta)))));
+}
+template <class DT>
+HWY_INLINE hn::Vec<DT> ColourOfRaw(DT d, hn::Vec<DT> raw_q) {
+  return Sigmoid(d, hn::Mul(raw_q, hn::Set(d, 1.f / 256.f)));
+}
+
+// A table of 65536 values (FastActivationTables) at raw_q + 32768.
+template <class DT>
+HWY_INLINE hn::Vec<DT> FromTable(DT d, const float* table, hn::Vec<DT> raw_q) {
+  const hn::RebindToSigned<DT> di;
+  return hn::GatherIndex(d, table, hn::Add(hn::ConvertTo(di, raw_q), hn::Set(di, 32768)));
+}
+
 #if HWY_TARGET == HWY_AVX3_DL || HWY_TARGET == HWY_AVX2
 // Outputs summed together: 4 keeps AVX2's 16 registers from spilling (1.6 %
 // less time on lego than 8); AVX-512 has 32.
@@ -165,9 +185,12 @@ HWY_INLINE void FusedLast(DT d, const ByteInputs<hn::Vec<hn::RebindToSigned<DT>>
 // the density net's inputs in xq (kFusedF / 4 words of N lanes), the
 // direction terms at dir_q picked by the lane slots `slot` (relative to
 // dir_q); out rows 0..4 of N lanes: alpha, 1 - alpha, r, g, b.
+// alpha_table and sigmoid_table (FastActivationTables for delta, or null):
+// the activations read from them.
 template <class DT>
 HWY_INLINE void FusedNets(DT d, size_t N, const FastModel& fm, const float* p, const int32_t* q, const int32_t* xq,
-                          const float* dir_q, const int32_t* slot, float delta, float* out) {
+                          const float* dir_q, const int32_t* slot, float delta, const float* alpha_table,
+                          const float* sigmoid_table, float* out) {
   const hn::RebindToSigned<DT> di;
   using VI = hn::Vec<decltype(di)>;
   using VF = hn::Vec<DT>;
@@ -185,9 +208,7 @@ HWY_INLINE void FusedNets(DT d, size_t N, const FastModel& fm, const float* p, c
   FusedLast<kFusedG, kFusedH / 4>(d, hx, q + d1.wq, q + d1.bq, p + d1.m, geo);
 
   // Opacity from the raw density (1/256 steps).
-  const VF raw = hn::Mul(geo[0], hn::Set(d, 1.f / 256.f));
-  const VF sigma = hn::Exp(d, hn::Min(hn::Max(raw, hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
-  const VF alpha = hn::Neg(hn::Expm1(d, hn::Neg(hn::Mul(sigma, hn::Set(d, delta)))));
+  const VF alpha = alpha_table ? FromTable(d, alpha_table, geo[0]) : AlphaOfRaw(d, geo[0], delta);
   hn::Store(alpha, d, out);
   hn::Store(hn::Sub(hn::Set(d, 1.f), alpha), d, out + N);
 
@@ -210,12 +231,12 @@ HWY_INLINE void FusedNets(DT d, size_t N, const FastModel& fm, const float* p, c
   VF rgb[3];
   FusedLast<3, kFusedC / 4>(d, chx, q + c1.wq, q + c1.bq, p + c1.m, rgb);
   for (int k = 0; k < 3; ++k)
-    hn::Store(Sigmoid(d, hn::Mul(rgb[k], hn::Set(d, 1.f / 256.f))), d, out + size_t(2 + k) * N);
+    hn::Store(sigmoid_table ? FromTable(d, sigmoid_table, rgb[k]) : ColourOfRaw(d, rgb[k]), d, out + size_t(2 + k) * N);
 }
 #else
 template <class DT>
 HWY_INLINE void FusedNets(DT, size_t, const FastModel&, const float*, const int32_t*, const int32_t*, const float*,
-                          const int32_t*, float, float*) {}
+                          const int32_t*, float, const float*, const float*, float*) {}
 #endif
 
 }  // namespace HWY_NAMESPACE

@@ -413,7 +413,8 @@ void DirectionParts(DT d, size_t N, const FastModel& fm, const float* p, const i
 
 template <bool kInt8, class DT>
 void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_t* q, const float* dir,
-               size_t ray_stride, float delta, bool fused, Scratch& s, FastKernelSeconds* seconds) {
+               size_t ray_stride, float delta, bool fused, const FastActivationTables* tables, Scratch& s,
+               FastKernelSeconds* seconds) {
   Clock::time_point t0;
   if (seconds) t0 = Clock::now();
   const int F = fm.feature_channels, G = fm.geo_width, D = fm.dir_dims;
@@ -434,7 +435,8 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
   }
   if (fused) {
     if (kInt8)
-      FusedNets(d, N, fm, p, q, s.xq, s.dir_q + s.slot_base, s.slot, delta, s.out);
+      FusedNets(d, N, fm, p, q, s.xq, s.dir_q + s.slot_base, s.slot, delta, tables ? tables->alpha.data() : nullptr,
+                tables ? tables->sigmoid.data() : nullptr, s.out);
     else
       FusedNetsFloat(d, N, fm, p, s.a, s.dir_q + s.slot_base, s.slot, delta, s.out);
     if (seconds) seconds->mlp += std::chrono::duration<double>(Clock::now() - t1).count();
@@ -472,8 +474,9 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
 // chunk's first sample on) in the lanes of d (the tail repeats the last
 // sample; Int8: slots[l] is lane l's slot in s.dir_q), their outputs to out.
 template <bool kInt8, class DT>
-void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, bool fused, const FastBatch& b, size_t valid,
-              const int32_t* slots, const float* dir, size_t ray_stride, float delta, Scratch& s, FastSampleOut* out,
+void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, bool fused,
+              const FastActivationTables* tables, const FastBatch& b, size_t valid, const int32_t* slots,
+              const float* dir, size_t ray_stride, float delta, Scratch& s, FastSampleOut* out,
               FastKernelSeconds* seconds) {
   const size_t N = hn::Lanes(d);
   const hn::RebindToSigned<DT> di;
@@ -497,7 +500,7 @@ void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, bool 
   }
   s.slot_base = slot[0];
   hn::Store(hn::Sub(hn::Load(di, slot), hn::Set(di, s.slot_base)), di, s.slot);
-  EvalChunk<kInt8>(d, N, fm, p, q, dir, ray_stride, delta, fused, s, seconds);
+  EvalChunk<kInt8>(d, N, fm, p, q, dir, ray_stride, delta, fused, tables, s, seconds);
   for (size_t l = 0; l < valid; ++l) {
     FastSampleOut& o = out[b.order[l]];
     o.alpha = s.out[l];
@@ -507,7 +510,7 @@ void RunChunk(DT d, const FastModel& fm, const float* p, const int32_t* q, bool 
 }
 
 void EvalBatch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t n, const float* dir, size_t ray_stride,
-               float delta, FastSampleOut* out, FastKernelSeconds* seconds) {
+               float delta, FastSampleOut* out, FastKernelSeconds* seconds, const FastActivationTables* given) {
   const DF d;
   const hn::Half<DF> dh;
   const size_t N = hn::Lanes(d);
@@ -516,6 +519,9 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t
   const bool int8 = fm.arithmetic == FastArithmetic::Int8;
   const int32_t* q = int8 && !fm.quads.empty() ? fm.mlp_quads(mlp) : nullptr;
   const bool fused = FusedShape(fm, q);  // the default MLP shape: FusedNets
+  // Tables made for another spacing (or for the float path) are not read.
+  const FastActivationTables* tables =
+      int8 && given && given->delta == delta && given->alpha.size() == 65536 ? given : nullptr;
   // Int8: per segment, the rays met (a new slot at each change of ray: a
   // ray's samples are consecutive) and their direction parts.
   alignas(64) uint32_t seg_rays[kSegment];
@@ -571,13 +577,13 @@ void EvalBatch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t
     b.order += i0;
     if (N >= 8 && valid <= hn::Lanes(dh)) {
       if (int8)
-        RunChunk<true>(dh, fm, p, q, fused, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
+        RunChunk<true>(dh, fm, p, q, fused, tables, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
       else
-        RunChunk<false>(dh, fm, p, q, fused, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
+        RunChunk<false>(dh, fm, p, q, fused, tables, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
     } else if (int8) {
-      RunChunk<true>(d, fm, p, q, fused, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
+      RunChunk<true>(d, fm, p, q, fused, tables, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
     } else {
-      RunChunk<false>(d, fm, p, q, fused, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
+      RunChunk<false>(d, fm, p, q, fused, tables, b, valid, slots, dir, ray_stride, delta, s, out, seconds);
     }
   }
 }
@@ -619,6 +625,16 @@ void EncodeDirections(const FastModel& fm, const float* dx, const float* dy, con
   }
 }
 
+void ActivationTables(float delta, float* alpha, float* sigmoid) {
+  const DF d;
+  const size_t N = hn::Lanes(d);
+  for (size_t i = 0; i < 65536; i += N) {                                   // 65536 is a multiple of every lane count
+    const VF raw_q = hn::Add(hn::Iota(d, float(i)), hn::Set(d, -32768.f));  // exact integers
+    hn::StoreU(AlphaOfRaw(d, raw_q, delta), d, alpha + i);
+    hn::StoreU(ColourOfRaw(d, raw_q), d, sigmoid + i);
+  }
+}
+
 int64_t Target() { return HWY_TARGET; }
 
 int32_t ByteFormOffset() { return kHaveDotBytes ? kByteOffset : -1; }
@@ -633,18 +649,31 @@ HWY_AFTER_NAMESPACE();
 namespace edrnr {
 
 HWY_EXPORT(EvalBatch);
+HWY_EXPORT(ActivationTables);
 HWY_EXPORT(EncodeDirections);
 HWY_EXPORT(Target);
 HWY_EXPORT(ByteFormOffset);
 HWY_EXPORT(FusedModel);
 
 void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t n, const float* dir,
-                     size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds) {
-  HWY_DYNAMIC_DISPATCH(EvalBatch)(fm, mlp, batch, n, dir, ray_stride, delta, out, seconds);
+                     size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds,
+                     const FastActivationTables* tables) {
+  HWY_DYNAMIC_DISPATCH(EvalBatch)(fm, mlp, batch, n, dir, ray_stride, delta, out, seconds, tables);
+}
+
+FastActivationTables fast_activation_tables(const FastModel& fm, float delta) {
+  FastActivationTables t;
+  if (fm.arithmetic != FastArithmetic::Int8) return t;
+  t.delta = delta;
+  t.alpha.resize(65536);
+  t.sigmoid.resize(65536);
+  HWY_DYNAMIC_DISPATCH(ActivationTables)(delta, t.alpha.data(), t.sigmoid.data());
+  return t;
 }
 
 void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastSample* samples, const uint32_t* order, size_t n,
-                     const float* dir, size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds) {
+                     const float* dir, size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds,
+                     const FastActivationTables* tables) {
   std::vector<uint32_t> ray(n), vertex(n);
   std::vector<float> fx(n), fy(n), fz(n);
   for (size_t i = 0; i < n; ++i) {
@@ -656,7 +685,7 @@ void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastSample* sample
     fz[i] = r.fz;
   }
   const FastBatch batch{ray.data(), vertex.data(), fx.data(), fy.data(), fz.data(), order};
-  fast_eval_batch(fm, mlp, batch, n, dir, ray_stride, delta, out, seconds);
+  fast_eval_batch(fm, mlp, batch, n, dir, ray_stride, delta, out, seconds, tables);
 }
 
 void fast_encode_directions(const FastModel& fm, const float* dx, const float* dy, const float* dz, size_t n,

@@ -10,6 +10,7 @@
 // chunk), so the packed MLP (fast_model.h) stays in L1 for the whole batch.
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include "render/fast_model.h"
 
@@ -48,16 +49,31 @@ struct FastBatch {
   const uint32_t* order = nullptr;
 };
 
+// The INT8 path's activations by table: its raw outputs are integers in
+// 1/256 steps within [-32768, 32767], so alpha (of the raw density, for one
+// sample spacing) and the sigmoid (of a raw colour) take 65536 values each,
+// computed once with the kernels' own functions (the same bits).
+struct FastActivationTables {
+  float delta = 0;             // the sample spacing alpha was made for
+  std::vector<float> alpha;    // alpha[raw + 32768]
+  std::vector<float> sigmoid;  // sigmoid[raw + 32768]
+};
+// The tables of fm (INT8 arithmetic) for sample spacing delta: about 0.3 ms.
+FastActivationTables fast_activation_tables(const FastModel& fm, float delta);
+
 // Evaluates samples i < n of `batch`, which all use MLP `mlp`, and writes
 // out[batch.order[i]]. dir: the direction inputs of the tile's rays
 // (fast_encode_directions), value d of ray r at dir[d * ray_stride + r].
 // delta: sample spacing in scene units. seconds (optional) collects the
-// time per phase.
+// time per phase. tables (optional; INT8 path, made for delta): the
+// activations read from them, with the same results.
 void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastBatch& batch, size_t n, const float* dir,
-                     size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds);
+                     size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds,
+                     const FastActivationTables* tables = nullptr);
 // The same for the records samples[order[i]], i < n (made into a FastBatch).
 void fast_eval_batch(const FastModel& fm, uint32_t mlp, const FastSample* samples, const uint32_t* order, size_t n,
-                     const float* dir, size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds);
+                     const float* dir, size_t ray_stride, float delta, FastSampleOut* out, FastKernelSeconds* seconds,
+                     const FastActivationTables* tables = nullptr);
 
 // The direction inputs of n rays with unit directions (dx[r], dy[r], dz[r]):
 // encode_direction's values (Float), or those values as INT8 codes of step

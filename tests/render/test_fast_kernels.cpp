@@ -77,12 +77,22 @@ BatchInputs batch_inputs(const FastModel& fm, const Batch& batch, const std::vec
 }
 
 // Samples [0, len) of the batch through fm's MLP (sample i's outputs at i).
-std::vector<FastSampleOut> eval(const FastModel& fm, const Batch& batch, const BatchInputs& in, size_t len,
-                                float delta) {
+std::vector<FastSampleOut> eval(const FastModel& fm, const Batch& batch, const BatchInputs& in, size_t len, float delta,
+                                const FastActivationTables* tables = nullptr) {
   std::vector<FastSampleOut> out(batch.samples.size());
   fast_eval_batch(fm, batch.mlp, batch.samples.data(), in.order.data(), len, in.dir.data(), kRays, delta, out.data(),
-                  nullptr);
+                  nullptr, tables);
   return out;
+}
+
+// Every sample's outputs, bit for bit.
+void expect_same_outputs(const std::vector<FastSampleOut>& x, const std::vector<FastSampleOut>& y, size_t len) {
+  for (size_t i = 0; i < len; ++i) {
+    SCOPED_TRACE(testing::Message() << "sample " << i);
+    ASSERT_EQ(bits(x[i].alpha), bits(y[i].alpha));
+    ASSERT_EQ(bits(x[i].trans), bits(y[i].trans));
+    for (int c = 0; c < 3; ++c) ASSERT_EQ(bits(x[i].rgb[c]), bits(y[i].rgb[c]));
+  }
 }
 
 // Every run of samples [start, start + len) evaluated as a batch of its own
@@ -155,16 +165,20 @@ TEST(FastKernels, FusedChunkGivesTheGeneralLayersBits) {
     EXPECT_EQ(fast_fused_shape(fused), a == FastArithmetic::Float || !fused.quads.empty());
     EXPECT_FALSE(fast_fused_shape(general));
     const BatchInputs in = batch_inputs(fused, batch, dx, dy, dz);
+    // The INT8 path's activation tables (read by the fused chunk; made for
+    // another spacing, they are not read) give the same bits too.
+    const FastActivationTables tables = fast_activation_tables(fused, delta);
+    const FastActivationTables other = fast_activation_tables(fused, 2 * delta);
+    EXPECT_EQ(tables.alpha.size(), a == FastArithmetic::Int8 ? 65536u : 0u);
     for (size_t len : {batch.samples.size(), size_t(6)}) {
-      const std::vector<FastSampleOut> x = eval(fused, batch, in, len, delta), y = eval(general, batch, in, len, delta);
+      SCOPED_TRACE(testing::Message() << "len " << len);
+      const std::vector<FastSampleOut> y = eval(general, batch, in, len, delta);
+      const std::vector<FastSampleOut> x = eval(fused, batch, in, len, delta);
+      expect_same_outputs(x, y, len);
+      expect_same_outputs(eval(fused, batch, in, len, delta, &tables), y, len);
+      expect_same_outputs(eval(fused, batch, in, len, delta, &other), y, len);
       int opaque = 0;
-      for (size_t i = 0; i < len; ++i) {
-        SCOPED_TRACE(testing::Message() << "len " << len << " sample " << i);
-        ASSERT_EQ(bits(x[i].alpha), bits(y[i].alpha));
-        ASSERT_EQ(bits(x[i].trans), bits(y[i].trans));
-        for (int c = 0; c < 3; ++c) ASSERT_EQ(bits(x[i].rgb[c]), bits(y[i].rgb[c]));
-        opaque += x[i].alpha > 0.01f;
-      }
+      for (size_t i = 0; i < len; ++i) opaque += x[i].alpha > 0.01f;
       if (len > 6) EXPECT_GT(opaque, 0);  // the later layers see something
     }
   }
