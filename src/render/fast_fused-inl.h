@@ -150,21 +150,10 @@ HWY_INLINE void FusedHidden(DT d, const ByteInputs<hn::Vec<hn::RebindToSigned<DT
                             hn::Vec<hn::RebindToSigned<DT>>* y) {
   static_assert(OUT % kFusedBlock == 0, "whole blocks of outputs");
   const hn::RebindToSigned<DT> di;
-  const hn::Vec<DT> lo = hn::Zero(d), hi = hn::Set(d, 127.f);
   for (int o = 0; o < OUT; o += kFusedBlock) {
     hn::Vec<decltype(di)> acc[kFusedBlock];
     FusedSums<kFusedBlock, WORDS, kSigned>(x, wq, bq, o, acc);
-    for (int g = 0; g < kFusedBlock; g += 4) {
-      hn::Vec<decltype(di)> word = hn::Set(di, kByteOffset == 128 ? int32_t(0x80808080u) : 0);
-      for (int b = 0; b < 4; ++b) {
-        const int k = g + b;
-        hn::Vec<DT> v = hn::ConvertTo(d, acc[k]);
-        if (dir) v = hn::Add(v, hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o + k) * kDirRow), lanes));
-        v = hn::Min(hn::Max(hn::Mul(v, hn::Set(d, mult[o + k])), lo), hi);
-        word = hn::Or(word, hn::ShiftLeftSame(RoundToInt(d, v), 8 * b));
-      }
-      y[(o + g) / 4] = word;
-    }
+    for (int g = 0; g < kFusedBlock; g += 4) y[(o + g) / 4] = HiddenWord(d, acc + g, o + g, mult, dir, lanes);
   }
 }
 

@@ -21,6 +21,8 @@
 #include <hwy/contrib/math/math-inl.h>
 #include <hwy/highway.h>
 
+#include "render/fast_convert-inl.h"  // ToInt32 (per target)
+
 HWY_BEFORE_NAMESPACE();
 namespace edrnr {
 namespace HWY_NAMESPACE {
@@ -94,6 +96,13 @@ void Dense(DT d, size_t N, const float* X, int in, int i0, int i1, const float* 
     o += 2;
   }
   if (o < out) DenseBlock<1>(d, N, X, in, i0, i1, W, B, o, ACC, e);
+}
+
+// round(v) as int32 lanes, v already within the int32 range (to nearest
+// even, as hn::Round).
+template <class DT>
+HWY_INLINE hn::Vec<hn::RebindToSigned<DT>> RoundToInt(DT, hn::Vec<DT> v) {
+  return ToInt32<false>(hn::RebindToSigned<DT>(), v);
 }
 
 #if HWY_TARGET == HWY_AVX3_DL || HWY_TARGET == HWY_AVX2
@@ -173,21 +182,25 @@ HWY_INLINE V DotBytes(V acc, const ByteInputs<V>& x, const int32_t* w) {
   return acc;
 }
 
-// round(v) as int32 lanes, v already within the int32 range (the conversion
-// rounds to nearest even, as hn::Round).
-template <class DT>
-HWY_INLINE hn::Vec<hn::RebindToSigned<DT>> RoundToInt(DT d, hn::Vec<DT> v) {
-  hn::Vec<hn::RebindToSigned<DT>> r = hn::Zero(hn::RebindToSigned<DT>());
-  (void)d;
-  // Only AVX3_DL has 64-byte vectors here; the discarded branches are not
-  // instantiated for the other targets.
-  if constexpr (sizeof(v.raw) == 64)
-    r.raw = _mm512_cvtps_epi32(v.raw);
-  else if constexpr (sizeof(v.raw) == 32)
-    r.raw = _mm256_cvtps_epi32(v.raw);
-  else
-    r.raw = _mm_cvtps_epi32(v.raw);
-  return r;
+// Four sums acc[0..3] of outputs o..o + 3 of a hidden layer as one word of
+// the next layer's byte form: clamp(round(mult (sum + dir)), 0, 127) plus
+// kByteOffset, output o + b in byte b. dir (null: none): the colour net's
+// direction terms, output r's of the lanes' slots at dir[r * kDirRow]
+// picked by `lanes`. (The bounds are integers, so clamping before or after
+// rounding is the same.)
+template <class DT, class VI, class Idx>
+HWY_INLINE VI HiddenWord(DT d, const VI* acc, int o, const float* mult, const float* dir, Idx lanes) {
+  const hn::RebindToSigned<DT> di;
+  const hn::Vec<DT> lo = hn::Zero(d), hi = hn::Set(d, 127.f);
+  // The offset of every byte (the values are below 128).
+  VI word = hn::Set(di, kByteOffset == 128 ? int32_t(0x80808080u) : 0);
+  for (int b = 0; b < 4; ++b) {
+    hn::Vec<DT> v = hn::ConvertTo(d, acc[b]);
+    if (dir) v = hn::Add(v, hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o + b) * kDirRow), lanes));
+    v = hn::Min(hn::Max(hn::Mul(v, hn::Set(d, mult[o + b])), lo), hi);
+    word = hn::Or(word, hn::ShiftLeftSame(RoundToInt(d, v), 8 * b));
+  }
+  return word;
 }
 
 // The sums bias + W X of outputs [o, o + NB) in the byte form: the inputs in
@@ -238,19 +251,8 @@ HWY_INLINE void DenseBytesToBytes(DT d, size_t N, const int32_t* xq, int words, 
   const hn::RebindToSigned<DT> di;
   hn::Vec<decltype(di)> acc[NB];
   ByteSums<NB, kSigned>(di, N, xq, words, wq, bq, o, acc);
-  const hn::Vec<DT> lo = hn::Zero(d), hi = hn::Set(d, 127.f);
-  for (int g = 0; g < NB; g += 4) {
-    // The offset of every byte (the values are below 128).
-    hn::Vec<decltype(di)> word = hn::Set(di, kByteOffset == 128 ? int32_t(0x80808080u) : 0);
-    for (int b = 0; b < 4; ++b) {
-      const int k = g + b;
-      hn::Vec<DT> v = hn::ConvertTo(d, acc[k]);
-      if (dir) v = hn::Add(v, hn::TableLookupLanes(hn::LoadU(d, dir + size_t(o + k) * kDirRow), lanes));
-      v = hn::Min(hn::Max(hn::Mul(v, hn::Set(d, mult[o + k])), lo), hi);
-      word = hn::Or(word, hn::ShiftLeftSame(RoundToInt(d, v), 8 * b));
-    }
-    hn::Store(word, di, xq_out + size_t(o + g) / 4 * N);
-  }
+  for (int g = 0; g < NB; g += 4)
+    hn::Store(HiddenWord(d, acc + g, o + g, mult, dir, lanes), di, xq_out + size_t(o + g) / 4 * N);
 }
 
 // The byte form of input rows [0, rows) of X (integers in [-128, 127]): 4
@@ -332,10 +334,6 @@ void DirectionBytes(DT d, size_t N, const int32_t* xq, int words, const int32_t*
   for (; o < out; ++o) DenseBytesBlock<1, true>(d, N, xq, words, wq, bq, o, dir_q, e, kDirRow);
 }
 #else
-template <class DT>
-HWY_INLINE hn::Vec<hn::RebindToSigned<DT>> RoundToInt(DT, hn::Vec<DT> v) {
-  return hn::NearestInt(v);
-}
 template <class DT>
 void PackBytes(DT, size_t, const float*, int, int32_t*) {}
 template <class DT>

@@ -14,6 +14,7 @@
 // clang-format off
 #include <hwy/foreach_target.h>  // before highway.h
 #include <hwy/highway.h>
+#include "render/fast_convert-inl.h"  // ToInt32 (per target)
 // clang-format on
 
 HWY_BEFORE_NAMESPACE();
@@ -40,26 +41,6 @@ HWY_INLINE bool Occupied(const Vec3i& v, const Grid& g) {
   const size_t word = kCell * FineIndex(v, g.fine_res) + size_t((v.z >> 1) & 1);
   const int bit = (v.x & 3) + 4 * (v.y & 3) + 16 * (v.z & 1);
   return (g.words[word] >> bit) & 1u;
-}
-
-// The lanes' float values truncated to int32, for values that fit it (the
-// lanes that matter lie in the grid; the others are masked afterwards):
-// one conversion on x86, without the fix-up of out-of-range lanes that
-// hn::ConvertTo adds there.
-template <class DI, class VF>
-HWY_INLINE hn::Vec<DI> TruncInRange(DI di, VF v) {
-#if HWY_TARGET == HWY_AVX2 || HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
-  hn::Vec<DI> r = hn::Zero(di);
-  if constexpr (sizeof(v.raw) == 64)
-    r.raw = _mm512_cvttps_epi32(v.raw);
-  else if constexpr (sizeof(v.raw) == 32)
-    r.raw = _mm256_cvttps_epi32(v.raw);
-  else
-    r.raw = _mm_cvttps_epi32(v.raw);
-  return r;
-#else
-  return hn::ConvertTo(di, v);
-#endif
 }
 
 #if HWY_TARGET == HWY_AVX2
@@ -118,9 +99,11 @@ uint32_t TestCandidates(FastMarcher::State& st, const Grid& g, int64_t k, int co
               hn::And(hn::Ge(pz, zero), hn::Le(pz, hi)));
   const auto inside = hn::And(hn::RebindMask(di, inside_f), hn::Lt(lane, hn::Set(di, count)));
   const auto top = hn::Set(di, g.micro_res - 1);
-  const auto vx = hn::Min(TruncInRange(di, px), top);
-  const auto vy = hn::Min(TruncInRange(di, py), top);
-  const auto vz = hn::Min(TruncInRange(di, pz), top);
+  // Truncated without Highway's fix-up of out-of-range lanes: the lanes
+  // that matter lie in the grid, the others are masked below.
+  const auto vx = hn::Min(ToInt32<true>(di, px), top);
+  const auto vy = hn::Min(ToInt32<true>(di, py), top);
+  const auto vz = hn::Min(ToInt32<true>(di, pz), top);
   const auto fr = hn::Set(di, g.fine_res);
   const auto fine =
       hn::Add(hn::ShiftRight<2>(vx), hn::Mul(fr, hn::Add(hn::ShiftRight<2>(vy), hn::Mul(fr, hn::ShiftRight<2>(vz)))));
