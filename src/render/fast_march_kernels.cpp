@@ -192,40 +192,52 @@ struct Out {
 // how many.
 template <bool kRecords>
 HWY_INLINE int Emit(FastMarcher::State& st, const Grid& g, Out& out, int room) {
+  // The marcher's cursor and the output count in locals: the records'
+  // stores could alias the state's words, which would otherwise be
+  // stored and read again for every sample.
+  uint32_t pending = st.pending;
+  int j = st.found_next;
+  int32_t block = st.block;
+  int written = out.written;
   int n = 0;
-  while (st.pending != 0 && n < room) {
-    const int lane = std::countr_zero(st.pending);  // the pending samples are handed out in order
-    st.pending &= st.pending - 1;
-    const int j = st.found_next++;
+  while (pending != 0 && n < room) {
+    const int lane = std::countr_zero(pending);  // the pending samples are handed out in order
+    pending &= pending - 1;
     ++n;
     const uint32_t* cell = g.words + kCell * size_t(st.found_fine[j]);  // read by the vector test
-    st.block = int32_t(cell[FastSkipGrid::kCellBlock]);
+    block = int32_t(cell[FastSkipGrid::kCellBlock]);
     if constexpr (kRecords) {
       const int32_t mlp = int32_t(cell[FastSkipGrid::kCellMlp]);
-      if (mlp < 0 || st.block < 0) {
+      if (mlp < 0 || block < 0) {
         ++*out.missing;
+        ++j;
         continue;
       }
-      FastSample& r = out.records[out.written++];
+      FastSample& r = out.records[written++];
       r.ray = out.ray;
       r.mlp = uint32_t(mlp);
-      r.vertex = uint32_t(size_t(st.block) * kBlockVerts + size_t(st.found_vertex[j]));
+      r.vertex = uint32_t(size_t(block) * kBlockVerts + size_t(st.found_vertex[j]));
       r.fx = st.found_f[0][j];
       r.fy = st.found_f[1][j];
       r.fz = st.found_f[2][j];
     } else {
       // The micro voxel from the candidate's point again (the same float
       // operations as the vector test, which found the point in the grid).
-      MarchSample& s = out.samples[out.written];
+      MarchSample& s = out.samples[written];
       s.k = st.chunk_k + lane;
       Vec3i v;
       VoxelOf(st.ray.point(s.k), g, v);
       // v + (p - v) is p: the difference of a float in [v, v + 1] and v >= 0 is exact.
       s.p_micro = Vec3f{float(v.x) + st.found_f[0][j], float(v.y) + st.found_f[1][j], float(v.z) + st.found_f[2][j]};
       s.voxel = v;
-      out.blocks[out.written++] = st.block;
+      out.blocks[written++] = block;
     }
+    ++j;
   }
+  st.pending = pending;
+  st.found_next = j;
+  st.block = block;
+  out.written = written;
   return n;
 }
 
