@@ -315,7 +315,21 @@ class TileRenderer {
     };
     for (int i = 0; i < g; ++i) {
       const int r = group[i];
-      for (uint32_t j = w.begin[r]; j < w.end[r]; ++j) {
+      const uint32_t b = w.begin[r], e = w.end[r];
+      if (b == e) continue;
+      // A ray meets each coarse voxel (a box) in one stretch, so when its
+      // first and last samples share an MLP, all of them do.
+      const uint32_t first = w.samples[b].mlp;
+      if (first == w.samples[e - 1].mlp) {
+        if (first != run_mlp) {
+          flush();
+          run_mlp = first;
+          run = 0;
+        }
+        run += e - b;
+        continue;
+      }
+      for (uint32_t j = b; j < e; ++j) {
         const uint32_t mlp = w.samples[j].mlp;
         if (mlp != run_mlp) {
           flush();
