@@ -317,7 +317,8 @@ class TileRenderer {
       const int r = group[i];
       const uint32_t b = w.begin[r], e = w.end[r];
       if (b == e) continue;
-      // A ray meets each coarse voxel (a box) in one stretch, so when its
+      // A ray meets each coarse voxel (a box) in one stretch, and each MLP
+      // is one coarse voxel's (SceneModel::mlp_coarse_index), so when its
       // first and last samples share an MLP, all of them do.
       const uint32_t first = w.samples[b].mlp;
       if (first == w.samples[e - 1].mlp) {
