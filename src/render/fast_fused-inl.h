@@ -9,7 +9,6 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "model/mlp.h"
 #include "render/fast_model.h"
 
 #if defined(EDRNR_RENDER_FAST_FUSED_INL_H_) == defined(HWY_TARGET_TOGGLE)
@@ -91,9 +90,8 @@ HWY_INLINE void FusedNetsFloat(DT d, size_t N, const FastModel& fm, const float*
   VF geo[kFusedG];
   FusedDense<kFusedG, kFusedH, kFusedFloatBlock>(d, h, p + d1.w, kFusedH, p + d1.b, geo);
 
-  const VF sigma = hn::Exp(d, hn::Min(hn::Max(geo[0], hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
-  const VF tau = hn::Mul(sigma, hn::Set(d, delta));
-  hn::Store(hn::Neg(hn::Expm1(d, hn::Neg(tau))), d, out);
+  const VF tau = OpticalDepth(d, geo[0], delta);
+  hn::Store(AlphaOfDepth(d, tau), d, out);
   hn::Store(hn::Exp(d, hn::Neg(tau)), d, out + N);
 
   // The colour net's first layer over the density outputs, then each
@@ -105,19 +103,6 @@ HWY_INLINE void FusedNetsFloat(DT d, size_t N, const FastModel& fm, const float*
   VF rgb[3];
   FusedDense<3, kFusedC, 3>(d, c, p + c1.w, kFusedC, p + c1.b, rgb);
   for (int k = 0; k < 3; ++k) hn::Store(Sigmoid(d, rgb[k]), d, out + size_t(2 + k) * N);
-}
-
-// The INT8 path's activations of raw outputs (integers in 1/256 steps):
-// alpha of the raw density for sample spacing delta, and the colour.
-template <class DT>
-HWY_INLINE hn::Vec<DT> AlphaOfRaw(DT d, hn::Vec<DT> raw_q, float delta) {
-  const hn::Vec<DT> raw = hn::Mul(raw_q, hn::Set(d, 1.f / 256.f));
-  const hn::Vec<DT> sigma = hn::Exp(d, hn::Min(hn::Max(raw, hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
-  return hn::Neg(hn::Expm1(d, hn::Neg(hn::Mul(sigma, hn::Set(d, delta)))));
-}
-template <class DT>
-HWY_INLINE hn::Vec<DT> ColourOfRaw(DT d, hn::Vec<DT> raw_q) {
-  return Sigmoid(d, hn::Mul(raw_q, hn::Set(d, 1.f / 256.f)));
 }
 
 // A table of 65536 values (FastActivationTables) at raw_q + 32768.
@@ -204,15 +189,7 @@ HWY_INLINE void FusedNets(DT d, size_t N, const FastModel& fm, const float* p, c
   // Colour net: the density outputs requantized to its INT8 inputs
   // (PackBytesScaled), plus the direction terms -> hidden -> raw colour.
   ByteInputs<VI> cx[kFusedG / 4];
-  {
-    const VF m = hn::Set(d, p[fm.geo_in]), lo = hn::Set(d, -128.f), hi = hn::Set(d, 127.f);
-    for (int j = 0; j < kFusedG / 4; ++j) {
-      VI u = hn::Zero(di);
-      for (int k = 0; k < 4; ++k)
-        u = hn::Or(u, ByteAt(RoundToInt(d, hn::Min(hn::Max(hn::Mul(geo[4 * j + k], m), lo), hi)), k));
-      cx[j] = PrepareBytes<true>(u);
-    }
-  }
+  for (int j = 0; j < kFusedG / 4; ++j) cx[j] = PrepareBytes<true>(ScaledWord(d, geo + 4 * j, 4, p[fm.geo_in]));
   VI c[kFusedC / 4];
   FusedHidden<kFusedC, kFusedG / 4, true>(d, cx, q + c0.wq, q + c0.bq, p + c0.m, dir_q, lanes, c);
   ByteInputs<VI> chx[kFusedC / 4];

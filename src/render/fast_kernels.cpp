@@ -208,27 +208,26 @@ void EvalChunk(DT d, size_t N, const FastModel& fm, const float* p, const int32_
 
   // Density net: its G outputs land in the first rows of the colour input.
   RunNet<kInt8>(d, N, fm.density, p, q, s.a, s.a, s.b, s.cin, -1, nullptr, nullptr, s.xq, s.xq2, features_packed);
-  hn::Vec<DT> raw = hn::Load(d, s.cin);
+  const hn::Vec<DT> raw = hn::Load(d, s.cin);
   if (kInt8) {
-    raw = hn::Mul(raw, hn::Set(d, 1.f / 256.f));
+    const hn::Vec<DT> alpha = AlphaOfRaw(d, raw, delta);
+    hn::Store(alpha, d, s.out);
+    hn::Store(hn::Sub(hn::Set(d, 1.f), alpha), d, s.out + N);
     if (bytes)  // the colour net's first inputs, packed
       PackBytesScaled(d, N, s.cin, G, p[fm.geo_in], s.xq);
     else
       Requantize(d, N, s.cin, G, p + fm.geo_in, false, -128.f, 127.f);
+  } else {
+    const hn::Vec<DT> tau = OpticalDepth(d, raw, delta);
+    hn::Store(AlphaOfDepth(d, tau), d, s.out);
+    hn::Store(hn::Exp(d, hn::Neg(tau)), d, s.out + N);
   }
-  const hn::Vec<DT> sigma = hn::Exp(d, hn::Min(hn::Max(raw, hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
-  const hn::Vec<DT> tau = hn::Mul(sigma, hn::Set(d, delta));
-  const hn::Vec<DT> alpha = hn::Neg(hn::Expm1(d, hn::Neg(tau)));
-  const hn::Vec<DT> trans = kInt8 ? hn::Sub(hn::Set(d, 1.f), alpha) : hn::Exp(d, hn::Neg(tau));
-  hn::Store(alpha, d, s.out);
-  hn::Store(trans, d, s.out + N);
   // The direction inputs' part of the colour net is in dir_q.
   RunNet<kInt8>(d, N, fm.color, p, q, s.cin, s.a, s.b, s.rgb, D > 0 ? G : -1, s.dir_q + s.slot_base, s.slot, s.xq,
                 s.xq2, bytes);
   for (int c = 0; c < 3; ++c) {
-    hn::Vec<DT> v = hn::Load(d, s.rgb + size_t(c) * N);
-    if (kInt8) v = hn::Mul(v, hn::Set(d, 1.f / 256.f));
-    hn::Store(Sigmoid(d, v), d, s.out + size_t(2 + c) * N);
+    const hn::Vec<DT> v = hn::Load(d, s.rgb + size_t(c) * N);
+    hn::Store(kInt8 ? ColourOfRaw(d, v) : Sigmoid(d, v), d, s.out + size_t(2 + c) * N);
   }
   if (seconds) seconds->mlp += std::chrono::duration<double>(Clock::now() - t1).count();
 }

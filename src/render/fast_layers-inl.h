@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <limits>
 
+#include "model/mlp.h"
 #include "render/fast_model.h"
 
 #if defined(EDRNR_RENDER_FAST_LAYERS_INL_H_) == defined(HWY_TARGET_TOGGLE)
@@ -36,6 +37,29 @@ hn::Vec<DT> Sigmoid(DT d, hn::Vec<DT> x) {
   const hn::Vec<DT> one = hn::Set(d, 1.f), limit = hn::Set(d, 87.f);
   const hn::Vec<DT> e = hn::Exp(d, hn::Min(hn::Max(hn::Neg(x), hn::Neg(limit)), limit));
   return hn::Div(one, hn::Add(one, e));
+}
+
+// The optical depth tau = sigma delta of a raw density output (sigma =
+// exp(clamp(raw)), model/mlp.h) and the opacity 1 - exp(-tau).
+template <class DT>
+HWY_INLINE hn::Vec<DT> OpticalDepth(DT d, hn::Vec<DT> raw, float delta) {
+  const hn::Vec<DT> sigma = hn::Exp(d, hn::Min(hn::Max(raw, hn::Set(d, kRawSigmaMin)), hn::Set(d, kRawSigmaMax)));
+  return hn::Mul(sigma, hn::Set(d, delta));
+}
+template <class DT>
+HWY_INLINE hn::Vec<DT> AlphaOfDepth(DT d, hn::Vec<DT> tau) {
+  return hn::Neg(hn::Expm1(d, hn::Neg(tau)));
+}
+
+// The INT8 path's activations of raw outputs (integers in 1/256 steps):
+// alpha of the raw density for sample spacing delta, and the colour.
+template <class DT>
+HWY_INLINE hn::Vec<DT> AlphaOfRaw(DT d, hn::Vec<DT> raw_q, float delta) {
+  return AlphaOfDepth(d, OpticalDepth(d, hn::Mul(raw_q, hn::Set(d, 1.f / 256.f)), delta));
+}
+template <class DT>
+HWY_INLINE hn::Vec<DT> ColourOfRaw(DT d, hn::Vec<DT> raw_q) {
+  return Sigmoid(d, hn::Mul(raw_q, hn::Set(d, 1.f / 256.f)));
 }
 
 // Room for the widest vector of any target.
@@ -268,19 +292,26 @@ void PackBytes(DT d, size_t N, const float* X, int rows, int32_t* xq) {
   }
 }
 
+// One word of the byte form from count <= 4 values v: clamp(round(v m),
+// -128, 127) in byte k (ByteAt).
+template <class DT>
+HWY_INLINE hn::Vec<hn::RebindToSigned<DT>> ScaledWord(DT d, const hn::Vec<DT>* v, int count, float m) {
+  const hn::Vec<DT> mv = hn::Set(d, m), lo = hn::Set(d, -128.f), hi = hn::Set(d, 127.f);
+  auto u = hn::Zero(hn::RebindToSigned<DT>());
+  for (int k = 0; k < count; ++k) u = hn::Or(u, ByteAt(RoundToInt(d, hn::Min(hn::Max(hn::Mul(v[k], mv), lo), hi)), k));
+  return u;
+}
+
 // PackBytes of the rows clamp(round(X * m), -128, 127) (Requantize's
 // values, which are not stored), rows [0, rows).
 template <class DT>
 void PackBytesScaled(DT d, size_t N, const float* X, int rows, float m, int32_t* xq) {
   const hn::RebindToSigned<DT> di;
-  const hn::Vec<DT> mv = hn::Set(d, m), lo = hn::Set(d, -128.f), hi = hn::Set(d, 127.f);
   for (int j = 0; 4 * j < rows; ++j) {
-    auto u = hn::Zero(di);
-    for (int k = 0; k < 4 && 4 * j + k < rows; ++k) {
-      const hn::Vec<DT> v = hn::Min(hn::Max(hn::Mul(hn::Load(d, X + size_t(4 * j + k) * N), mv), lo), hi);
-      u = hn::Or(u, ByteAt(RoundToInt(d, v), k));
-    }
-    hn::Store(u, di, xq + size_t(j) * N);
+    const int count = std::min(4, rows - 4 * j);
+    hn::Vec<DT> v[4];
+    for (int k = 0; k < count; ++k) v[k] = hn::Load(d, X + size_t(4 * j + k) * N);
+    hn::Store(ScaledWord(d, v, count, m), di, xq + size_t(j) * N);
   }
 }
 
