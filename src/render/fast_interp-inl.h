@@ -77,14 +77,14 @@ HWY_INLINE hn::Vec<DT> CodeValue(DT d, VU u, VU mask) {
   return hn::ConvertTo(d, hn::BitCast(hn::RebindToSigned<DT>(), hn::And(u, mask)));
 }
 
-// The two-word vertices of InterpolateQ4 on AVX-512: for the corner pair p
-// (words `offset` on from a sample's corner (0, 0, 0)), each sample's 4
-// words (a0, a1, b0, b1: corner a's two words, then b's) read with one
-// 16-byte load into a 128-bit block of a register (register q holds samples
-// q, q + 4, q + 8, q + 12), then transposed within the blocks, so that
-// vector a0 holds word a0 of samples 0 .. N - 1 in order: the rows
-// LoadInterleaved4 of the copies makes, without the copies (whose 16-byte
-// stores a 64-byte load cannot forward). Rows to words (N lanes each):
+// The two-word vertices of InterpolateQ4 on AVX-512 and on AVX2 (8 lanes):
+// for the corner pair p (words `offset` on from a sample's corner (0, 0,
+// 0)), each sample's 4 words (a0, a1, b0, b1: corner a's two words, then
+// b's) read with one 16-byte load into a 128-bit block of a register
+// (register q holds samples q, q + 4, q + 8, q + 12), then transposed
+// within the blocks, so that vector a0 holds word a0 of samples 0 .. N - 1
+// in order: the rows LoadInterleaved4 of the copies makes, without the
+// copies (whose 16-byte stores a wider load cannot forward). Rows to words (N lanes each):
 // a0 -> 2 p, b0 -> 2 p + 1, a1 -> 8 + 2 p, b1 -> 9 + 2 p.
 template <class DT>
 constexpr bool PairWordsInRegisters(DT d) {
