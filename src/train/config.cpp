@@ -189,6 +189,7 @@ void TrainConfig::validate() const {
   if (!(prune_part_fraction >= 0.f && prune_part_fraction <= 1.f))
     fail("train config: prune_part_fraction must be in [0, 1]");
   if (quant_refit_every < 1) fail("train config: quant_refit_every must be at least 1");
+  if (qat_activations_every < 1) fail("train config: qat_activations_every must be at least 1");
   if (!(mlp_equalize >= 0.f && mlp_equalize <= 1.f)) fail("train config: mlp_equalize must be in [0, 1]");
   if (mlp_equalize > 0.f && mlp_tie_weight > 0.f)
     fail(
@@ -310,6 +311,8 @@ const std::map<std::string, Field>& fields() {
       {"quant_refit_every", scalar(&TrainConfig::quant_refit_every)},
       {"mlp_equalize", scalar(&TrainConfig::mlp_equalize)},
       {"calibrate_activations", scalar(&TrainConfig::calibrate_activations)},
+      {"qat_activations", scalar(&TrainConfig::qat_activations)},
+      {"qat_activations_every", scalar(&TrainConfig::qat_activations_every)},
       {"max_state_gib", scalar(&TrainConfig::max_state_gib)},
       {"seed", scalar(&TrainConfig::seed)},
       {"downscale", scalar(&TrainConfig::downscale)},

@@ -132,6 +132,10 @@ struct TrainConfig {
                                       // less INT8 error; not with mlp_tie_weight
   bool calibrate_activations = true;  // the exported INT8 MLPs' input steps chosen from the training rays'
                                       // samples (train/calibrate.h) instead of the largest input seen
+  bool qat_activations = false;       // the quantization-aware phase also rounds every MLP layer's input to the
+                                      // chip's INT8 steps (the steps the export would write, refreshed below)
+  int qat_activations_every = 512;    // steps between refreshes of those steps (the first after
+                                      // quant_refit_every steps of the phase, once the inputs' ranges are seen)
 
   // --- memory ---
   // The trainer's state (feature pyramid, occupancy, feature blocks with their

@@ -260,8 +260,14 @@ EDRNR_CLONES void layer_input_grad(const float* W, int in, int out, const float*
 
 }  // namespace
 
+void quantize_block(float* block, int rows, float step, float lo, float hi) {
+  const float inv = 1.f / step;
+  for (size_t i = 0; i < size_t(rows) * kLanes; ++i)
+    block[i] = std::clamp(std::floor(block[i] * inv + 0.5f), lo, hi) * step;
+}
+
 void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, float* acts,
-                 int last_rows) {
+                 int last_rows, const float* in_steps) {
   const float* x = x0;
   float* y = acts;
   for (size_t k = 0; k < layers.size(); ++k) {
@@ -269,6 +275,7 @@ void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* param
     const bool last = k + 1 == layers.size();
     const int rows = last && last_rows >= 0 ? std::min(last_rows, l.out) : l.out;
     layer_forward(params + l.w, params + l.b, l.in, rows, x, y, !last);
+    if (in_steps && !last) quantize_block(y, l.out, in_steps[k + 1], 0.f, kActivationMax);
     x = y;
     y += size_t(l.out) * kLanes;
   }

@@ -79,8 +79,23 @@ MlpQ quantize_mlp(const MlpLayout& layout, const float* params, const std::vecto
 // ([out][kLanes] each; hidden layers after ReLU, the last layer linear).
 // last_rows >= 0 computes only the first last_rows outputs of the last layer
 // (the rest of its block is left untouched), e.g. 1 for the raw density alone.
+// With in_steps (one step per layer of the net), each hidden layer's output
+// is rounded to the next layer's INT8 input step (quantize_block, [0, 127]
+// steps after the ReLU), as the chip's datapath rounds it; x0 is used as
+// given (the caller rounds it). Backward passes treat the rounding as the
+// identity (straight-through).
 void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, float* acts,
-                 int last_rows = -1);
+                 int last_rows = -1, const float* in_steps = nullptr);
+
+// The chip's INT8 activations: the largest code, and the step of the
+// direction encoding's codes (|d| <= 1, its own fixed step; chip/tme.h).
+inline constexpr float kActivationMax = 127.f;
+inline constexpr float kDirectionStep = 1.f / 127.f;
+
+// Rounds rows x kLanes values to multiples of `step` (half up, as the chip
+// narrows), clamped to [lo, hi] steps: activations as the chip's INT8 inputs
+// hold them, for the quantization-aware phase (qat_activations).
+void quantize_block(float* block, int rows, float step, float lo, float hi);
 
 // Backward pass of one net over a chunk. d_last: [last out][kLanes], the loss
 // gradient with respect to the last layer's (linear) output. Adds parameter

@@ -115,6 +115,8 @@ void Trainer::State::do_step() {
       blocks.set_quantization(feature_quant);
     }
     update_fake_quantized_mlps();
+    const int64_t since = step - qat_step() - cfg.quant_refit_every;
+    if (cfg.qat_activations && since >= 0 && since % cfg.qat_activations_every == 0) refresh_activation_steps();
   }
   lap(kPhase);
 
@@ -214,6 +216,21 @@ void Trainer::State::update_fake_quantized_mlps() {
   mlp_eff.resize(mlp_params.size());
   for (int m = 0; m < n_mlps; ++m)
     fake_quantize_mlp(layout, &mlp_params[size_t(m) * layout.param_count], &mlp_eff[size_t(m) * layout.param_count]);
+}
+
+// The INT8 input step of every MLP layer as the export would write it now
+// (calibrated on the training rays with calibrate_activations, else the
+// largest input seen / 127): the later steps of the quantization-aware phase
+// round the activations to these, so the MLPs learn the chip's arithmetic.
+void Trainer::State::refresh_activation_steps() {
+  const SceneModel m = make_model(true, false);
+  const size_t nd = layout.density.size(), n_layers = nd + layout.color.size();
+  act_steps.assign(size_t(n_mlps) * n_layers, 1.f);
+  for (size_t mi = 0; mi < m.mlps_q8.size(); ++mi) {
+    const MlpQ& q = m.mlps_q8[mi];
+    for (size_t k = 0; k < n_layers; ++k)
+      act_steps[mi * n_layers + k] = k < nd ? q.density[k].in_scale : q.color[k - nd].in_scale;
+  }
 }
 
 AdamSettings Trainer::State::adam_settings() const { return {cfg.adam_beta1, cfg.adam_beta2, cfg.adam_eps}; }

@@ -42,7 +42,7 @@ uint64_t dataset_fingerprint(const Dataset& d) {
 
 // --- export ---------------------------------------------------------------
 
-SceneModel Trainer::State::make_model(bool quantized) const {
+SceneModel Trainer::State::make_model(bool quantized, bool trained_steps) const {
   if (phase == Phase::Main || cv_to_mlp.empty()) fail("the model cannot be exported before the occupancy is frozen");
   SceneModel m;
   m.scene_box = cfg.scene_box;
@@ -116,7 +116,17 @@ SceneModel Trainer::State::make_model(bool quantized) const {
   if (quantized) meta["train_psnr_quantized_db"] = std::round(psnr_quantized * 100) / 100;
   m.metadata_json = meta.dump();
   m.finalize();
-  if (quantized && cfg.calibrate_activations) {
+  if (quantized && trained_steps && !act_steps.empty()) {
+    // The activation steps the quantization-aware phase trained with.
+    const size_t nd = layout.density.size(), n_layers = nd + layout.color.size();
+    for (size_t mi = 0; mi < m.mlps_q8.size(); ++mi)
+      for (size_t k = 0; k < n_layers; ++k) {
+        DenseQ& l = k < nd ? m.mlps_q8[mi].density[k] : m.mlps_q8[mi].color[k - nd];
+        l.in_scale = act_steps[mi * n_layers + k];
+      }
+    meta["activation_steps"] = "trained (qat_activations)";
+    m.metadata_json = meta.dump();
+  } else if (quantized && cfg.calibrate_activations) {
     std::vector<Camera> cameras;
     for (const auto& f : data.frames) cameras.push_back(f.camera);
     CalibrationSettings cs;
@@ -171,6 +181,7 @@ std::vector<uint8_t> Trainer::State::save() const {
     w.put("mlp_m", mlp_m);
     w.put("mlp_v", mlp_v);
     w.put("layer_in_max", layer_in_max);
+    if (!act_steps.empty()) w.put("act_steps", act_steps);
     w.put("max_weight", max_weight);
     w.put("float_blocks", float_blocks);
     w.put("float_mlps", float_mlps);
@@ -304,6 +315,10 @@ void Trainer::State::load(const CheckpointReader& r) {
   const size_t n_layers = layout.density.size() + layout.color.size();
   if (phase == Phase::Quantize) expect_size("layer_in_max", layer_in_max.size(), size_t(n_mlps) * n_layers);
   if (!layer_in_max.empty()) expect_size("layer_in_max", layer_in_max.size(), size_t(n_mlps) * n_layers);
+  act_steps = r.has("act_steps") ? floats("act_steps") : std::vector<float>{};
+  if (!act_steps.empty()) expect_size("act_steps", act_steps.size(), size_t(n_mlps) * n_layers);
+  for (float a : act_steps)
+    if (!(a > 0.f)) bad("activation step", a);
   if (phase >= Phase::Quantize) update_fake_quantized_mlps();
   max_weight = r.get<float>("max_weight");
   if (!max_weight.empty()) expect_size("max_weight", max_weight.size(), occ.density.size());

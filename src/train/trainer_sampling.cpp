@@ -212,6 +212,16 @@ const float* Trainer::State::mlp_weights(int m) const {
   return p.data() + size_t(m) * layout.param_count;
 }
 
+const float* Trainer::State::act_steps_of(int m) const {
+  if (act_steps.empty()) return nullptr;
+  return act_steps.data() + size_t(m) * (layout.density.size() + layout.color.size());
+}
+
+const float* Trainer::State::color_steps(int m) const {
+  const float* steps = act_steps_of(m);
+  return steps ? steps + layout.density.size() : nullptr;
+}
+
 void Trainer::State::interpolate(const Vec3f& p, const Vec3i& m, float* out) const {
   if (phase == Phase::Main)
     pyramid.interpolate(p, m, out);
@@ -377,7 +387,9 @@ void Trainer::State::evaluate_density(Batch& b, size_t s0, size_t s1) const {
                       {b.micro[3 * s], b.micro[3 * s + 1], b.micro[3 * s + 2]}, f);
           for (int c = 0; c < F; ++c) x0[size_t(c) * kLanes + size_t(l)] = f[c];
         }
-        net_forward(layout.density, params, x0.data(), acts.data());
+        const float* steps = act_steps_of(w.mlp);
+        if (steps) quantize_block(x0.data(), F, steps[0], -kActivationMax - 1.f, kActivationMax);
+        net_forward(layout.density, params, x0.data(), acts.data(), -1, steps);
         const float* out = acts.data() + size_t(layout.density_act_floats - G) * kLanes;
         for (int l = 0; l < nl; ++l) {
           const size_t s = size_t(grouped[size_t(c0 + l)]);
@@ -388,8 +400,8 @@ void Trainer::State::evaluate_density(Batch& b, size_t s0, size_t s1) const {
   }
 }
 
-void Trainer::State::gather_color_input(const Batch& b, const std::vector<int32_t>& ids, int32_t c0, int nl,
-                                        float* x0) const {
+void Trainer::State::gather_color_input(const Batch& b, const std::vector<int32_t>& ids, int32_t c0, int nl, float* x0,
+                                        const float* steps) const {
   const int in = G + DD;
   std::fill(x0, x0 + size_t(in) * kLanes, 0.f);
   for (int l = 0; l < nl; ++l) {
@@ -397,6 +409,10 @@ void Trainer::State::gather_color_input(const Batch& b, const std::vector<int32_
     for (int c = 0; c < G; ++c) x0[size_t(c) * kLanes + size_t(l)] = b.geo[s * size_t(G) + size_t(c)];
     const float* d = &b.dir_enc[size_t(b.ray[s]) * size_t(DD)];
     for (int c = 0; c < DD; ++c) x0[size_t(G + c) * kLanes + size_t(l)] = d[c];
+  }
+  if (steps) {  // the density outputs at the colour net's step, the direction codes at their own
+    quantize_block(x0, G, steps[0], -kActivationMax - 1.f, kActivationMax);
+    quantize_block(x0 + size_t(G) * kLanes, DD, kDirectionStep, -kActivationMax, kActivationMax);
   }
 }
 
@@ -416,9 +432,10 @@ void Trainer::State::evaluate_color(Batch& b) const {
       int32_t chunk = w.chunk0;
       for (int32_t c0 = w.begin; c0 < w.end; c0 += kLanes, ++chunk) {
         const int nl = std::min(kLanes, w.end - c0);
-        gather_color_input(b, b.col_ids, c0, nl, x0.data());
+        const float* steps = color_steps(w.mlp);
+        gather_color_input(b, b.col_ids, c0, nl, x0.data(), steps);
         float* acts = &b.col_acts[size_t(chunk) * act_chunk];
-        net_forward(layout.color, params, x0.data(), acts);
+        net_forward(layout.color, params, x0.data(), acts, -1, steps);
         const float* out = acts + size_t(layout.color_act_floats - 3) * kLanes;
         for (int l = 0; l < nl; ++l) {
           const size_t s = size_t(b.col_ids[size_t(c0 + l)]);
@@ -517,7 +534,8 @@ void Trainer::State::backward_mlps(Batch& b, std::vector<float>& grad, bool cali
       for (int32_t c0 = w.begin; c0 < w.end; c0 += kLanes, ++chunk) {
         const int nl = std::min(kLanes, w.end - c0);
         // Colour net.
-        gather_color_input(b, b.col_ids, c0, nl, xc.data());
+        const float* dsteps = act_steps_of(w.mlp);
+        gather_color_input(b, b.col_ids, c0, nl, xc.data(), color_steps(w.mlp));
         std::fill(dz.begin(), dz.end(), 0.f);
         for (int l = 0; l < nl; ++l) {
           const size_t s = size_t(b.col_ids[size_t(c0 + l)]);
@@ -531,7 +549,8 @@ void Trainer::State::backward_mlps(Batch& b, std::vector<float>& grad, bool cali
           const size_t s = size_t(b.col_ids[size_t(c0 + l)]);
           for (int c = 0; c < F; ++c) xd[size_t(c) * kLanes + size_t(l)] = b.feat[s * size_t(F) + size_t(c)];
         }
-        net_forward(layout.density, params, xd.data(), actd.data());
+        if (dsteps) quantize_block(xd.data(), F, dsteps[0], -kActivationMax - 1.f, kActivationMax);
+        net_forward(layout.density, params, xd.data(), actd.data(), -1, dsteps);
         std::copy(dxc.begin(), dxc.begin() + ptrdiff_t(size_t(G) * kLanes), dgeo.begin());
         for (int l = 0; l < nl; ++l) dgeo[size_t(l)] += b.d_raw[size_t(b.col_ids[size_t(c0 + l)])];
         for (int l = nl; l < kLanes; ++l)

@@ -139,6 +139,10 @@ struct Trainer::State {
   std::vector<float> mlp_params, mlp_m, mlp_v;
   std::vector<float> mlp_eff;       // fake-quantized weights in the quantization-aware phase
   std::vector<float> layer_in_max;  // per MLP x layer: largest |input| seen in the quantization-aware phase
+  // Per MLP x layer (density then colour): the INT8 input step the
+  // quantization-aware phase rounds that layer's inputs to (qat_activations);
+  // empty until the phase's first refresh_activation_steps().
+  std::vector<float> act_steps;
 
   // Largest sample weight seen per micro voxel in the per-CV phase (for pruning).
   std::vector<float> max_weight;
@@ -186,14 +190,20 @@ struct Trainer::State {
 
   int32_t mlp_of_micro(int x, int y, int z) const;
   const float* mlp_weights(int m) const;
+  // MLP m's act_steps (density layers, then colour layers), or null when the
+  // activations are not rounded.
+  const float* act_steps_of(int m) const;
+  const float* color_steps(int m) const;  // the colour layers' part of it
   void interpolate(const Vec3f& p, const Vec3i& m, float* out) const;
   void prefetch_features(const Vec3i& m) const;
   // The march grid of the occupancy as it is now (rebuilt when occ changed).
   const FastSkipGrid& march_grid() const;
   void march(trainer_detail::Batch& b) const;
   void evaluate_density(trainer_detail::Batch& b, size_t s0, size_t s1) const;
+  // The colour net's input of samples ids[c0, c0 + nl), rounded to the chip's
+  // INT8 steps when steps (the colour net's act_steps) is not null.
   void gather_color_input(const trainer_detail::Batch& b, const std::vector<int32_t>& ids, int32_t c0, int nl,
-                          float* x0) const;
+                          float* x0, const float* steps) const;
   void evaluate_color(trainer_detail::Batch& b) const;
   double composite_rays(trainer_detail::Batch& b, bool with_grad) const;
   void backward_mlps(trainer_detail::Batch& b, std::vector<float>& grad, bool calibrate);
@@ -221,11 +231,15 @@ struct Trainer::State {
   void add_mlp_tie_gradient(std::vector<float>& grad) const;
   void equalize_mlps();
   void update_fake_quantized_mlps();
+  void refresh_activation_steps();
   AdamSettings adam_settings() const;
 
   // --- export and checkpoints (trainer_io.cpp) -------------------------------
 
-  SceneModel make_model(bool quantized) const;
+  // trained_steps: with act_steps set, the quantized MLPs take them as their
+  // input steps; else the steps are calibrated (calibrate_activations) or
+  // the largest inputs seen / 127.
+  SceneModel make_model(bool quantized, bool trained_steps = true) const;
   std::vector<uint8_t> save() const;
   void load(const CheckpointReader& r);
 };

@@ -171,6 +171,43 @@ TEST(MlpKernels, LayerForwardIsAffineThenRelu) {
   EXPECT_FLOAT_EQ(acts[2 * kLanes + 1], 12.f);
 }
 
+TEST(MlpKernels, ActivationRoundingIsHalfUpToTheStepAndClamped) {
+  // Step 0.5, codes in [-128, 127]: what the chip's INT8 inputs hold.
+  std::vector<float> x(2 * kLanes, 0.f);
+  const float in[8] = {0.24f, 0.26f, 0.75f, -0.75f, -0.8f, 100.f, -100.f, 63.5f};
+  const float want[8] = {0.f, 0.5f, 1.f, -0.5f, -1.f, 63.5f, -64.f, 63.5f};  // ties (1.5, -1.5 steps) go up
+  for (int i = 0; i < 8; ++i) x[size_t(i)] = in[i];
+  x[size_t(kLanes)] = 1.3f;  // the second row too
+  quantize_block(x.data(), 2, 0.5f, -128.f, 127.f);
+  for (int i = 0; i < 8; ++i) EXPECT_FLOAT_EQ(x[size_t(i)], want[i]) << in[i];
+  EXPECT_FLOAT_EQ(x[size_t(kLanes)], 1.5f);
+  EXPECT_EQ(x[size_t(kLanes) + 1], 0.f);  // zero stays zero
+}
+
+TEST(MlpKernels, ForwardWithStepsRoundsTheHiddenActivations) {
+  // The hand net of LayerForwardIsAffineThenRelu with input steps (-, 2): the
+  // hidden units (4.25, 0) and (6.25, 1) become (4, 0) and (6, 2) (1 step
+  // ties up to 2), so the outputs are 8.5 and 10.5.
+  const MlpLayout layout = hand_layout({2, 2, 1});
+  std::vector<float> p(layout.param_count, 0.f);
+  const auto& L0 = layout.density[0];
+  const auto& L1 = layout.density[1];
+  p[L0.w + 0] = 1.f, p[L0.w + 1] = 2.f, p[L0.w + 2] = -1.f, p[L0.w + 3] = 0.5f;
+  p[L0.b + 0] = 0.25f, p[L0.b + 1] = -3.f;
+  p[L1.w + 0] = 2.f, p[L1.w + 1] = -1.f, p[L1.b] = 0.5f;
+  std::vector<float> x(2 * kLanes, 0.f), acts(3 * kLanes);
+  x[0] = 1.f, x[kLanes] = 1.5f;
+  x[1] = -2.f, x[kLanes + 1] = 4.f;
+  const float steps[2] = {1.f, 2.f};
+  net_forward(layout.density, p.data(), x.data(), acts.data(), -1, steps);
+  EXPECT_FLOAT_EQ(acts[0], 4.f);
+  EXPECT_FLOAT_EQ(acts[kLanes], 0.f);
+  EXPECT_FLOAT_EQ(acts[2 * kLanes], 8.5f);
+  EXPECT_FLOAT_EQ(acts[1], 6.f);
+  EXPECT_FLOAT_EQ(acts[kLanes + 1], 2.f);
+  EXPECT_FLOAT_EQ(acts[2 * kLanes + 1], 10.5f);
+}
+
 TEST(MlpKernels, Int8QuantizationRoundsPerRow) {
   const float row[4] = {0.5f, -1.27f, 0.01f, 0.f};
   const float s = int8_row_scale(row, 4);
