@@ -148,8 +148,10 @@ MlpLayout hand_layout(std::vector<int> density_widths) {
   return MlpLayout(a);
 }
 
-TEST(MlpKernels, LayerForwardIsAffineThenRelu) {
-  // density net [2, 2, 1]: h = relu(W0 x + b0), out = W1 h + b1, by hand.
+// A density net [2, 2, 1] by hand, h = relu(W0 x + b0), out = W1 h + b1, on
+// two lanes: x = (1, 1.5) and (-2, 4). Returns the activations of net_forward
+// with `in_steps`.
+std::vector<float> hand_net_forward(const float* in_steps) {
   const MlpLayout layout = hand_layout({2, 2, 1});
   std::vector<float> p(layout.param_count, 0.f);
   const auto& L0 = layout.density[0];
@@ -158,9 +160,14 @@ TEST(MlpKernels, LayerForwardIsAffineThenRelu) {
   p[L0.b + 0] = 0.25f, p[L0.b + 1] = -3.f;
   p[L1.w + 0] = 2.f, p[L1.w + 1] = -1.f, p[L1.b] = 0.5f;
   std::vector<float> x(2 * kLanes, 0.f), acts(3 * kLanes);
-  x[0] = 1.f, x[kLanes] = 1.5f;      // lane 0: x = (1, 1.5)
-  x[1] = -2.f, x[kLanes + 1] = 4.f;  // lane 1: x = (-2, 4)
-  net_forward(layout.density, p.data(), x.data(), acts.data());
+  x[0] = 1.f, x[kLanes] = 1.5f;      // lane 0
+  x[1] = -2.f, x[kLanes + 1] = 4.f;  // lane 1
+  net_forward(layout.density, p.data(), x.data(), acts.data(), -1, in_steps);
+  return acts;
+}
+
+TEST(MlpKernels, LayerForwardIsAffineThenRelu) {
+  const std::vector<float> acts = hand_net_forward(nullptr);
   // lane 0: h = relu(1 + 3 + 0.25, -1 + 0.75 - 3) = (4.25, 0); out = 8.5 + 0.5 = 9
   EXPECT_FLOAT_EQ(acts[0], 4.25f);
   EXPECT_FLOAT_EQ(acts[kLanes], 0.f);
@@ -185,21 +192,11 @@ TEST(MlpKernels, ActivationRoundingIsHalfUpToTheStepAndClamped) {
 }
 
 TEST(MlpKernels, ForwardWithStepsRoundsTheHiddenActivations) {
-  // The hand net of LayerForwardIsAffineThenRelu with input steps (-, 2): the
-  // hidden units (4.25, 0) and (6.25, 1) become (4, 0) and (6, 2) (1 step
-  // ties up to 2), so the outputs are 8.5 and 10.5.
-  const MlpLayout layout = hand_layout({2, 2, 1});
-  std::vector<float> p(layout.param_count, 0.f);
-  const auto& L0 = layout.density[0];
-  const auto& L1 = layout.density[1];
-  p[L0.w + 0] = 1.f, p[L0.w + 1] = 2.f, p[L0.w + 2] = -1.f, p[L0.w + 3] = 0.5f;
-  p[L0.b + 0] = 0.25f, p[L0.b + 1] = -3.f;
-  p[L1.w + 0] = 2.f, p[L1.w + 1] = -1.f, p[L1.b] = 0.5f;
-  std::vector<float> x(2 * kLanes, 0.f), acts(3 * kLanes);
-  x[0] = 1.f, x[kLanes] = 1.5f;
-  x[1] = -2.f, x[kLanes + 1] = 4.f;
+  // The hand net with input steps (-, 2): the hidden units (4.25, 0) and
+  // (6.25, 1) become (4, 0) and (6, 2) (half a step ties up), so the outputs
+  // are 8.5 and 10.5.
   const float steps[2] = {1.f, 2.f};
-  net_forward(layout.density, p.data(), x.data(), acts.data(), -1, steps);
+  const std::vector<float> acts = hand_net_forward(steps);
   EXPECT_FLOAT_EQ(acts[0], 4.f);
   EXPECT_FLOAT_EQ(acts[kLanes], 0.f);
   EXPECT_FLOAT_EQ(acts[2 * kLanes], 8.5f);

@@ -259,6 +259,10 @@ TEST(Train, QatActivationsTrainTheChipsIntegerActivations) {
   c.quant_refit_every = 4;
   c.qat_activations_every = 6;  // step counts 84, 90, 96
   Trainer whole(data, c);
+  TrainOptions o;
+  o.stop_after = 93;  // after two refreshes
+  ASSERT_FALSE(whole.run(o));
+  const std::vector<uint8_t> ckpt = whole.checkpoint();
   ASSERT_TRUE(whole.run({}));
   const SceneModel q = whole.export_model(true);
   EXPECT_NE(q.metadata_json.find("\"activation_steps\""), std::string::npos);
@@ -276,14 +280,6 @@ TEST(Train, QatActivationsTrainTheChipsIntegerActivations) {
   std::printf("against the INT8 path: trainer %.2f dB, reference renderer %.2f dB\n", mine_db, reference_db);
   EXPECT_GT(mine_db, reference_db + 6.0);
 
-  std::vector<uint8_t> ckpt;
-  {
-    Trainer a(data, c);
-    TrainOptions o;
-    o.stop_after = 93;  // after two refreshes
-    ASSERT_FALSE(a.run(o));
-    ckpt = a.checkpoint();
-  }
   Trainer b(data, ckpt, "checkpoint");
   ASSERT_TRUE(b.run({}));
   EXPECT_EQ(model_bytes(b, true), model_bytes(whole, true));
