@@ -9,6 +9,7 @@
 #include "core/error.h"
 #include "model/mlp.h"
 #include "render/traversal.h"
+#include "train/mlp_kernels.h"
 
 namespace edrnr::train {
 namespace {
@@ -180,7 +181,7 @@ CalibrationReport calibrate_activation_scales(SceneModel& model, const std::vect
       int best = -kStepMin;  // k = 0: the step as it was
       for (int k = 0; k < kSteps; ++k)
         if (e[k] < e[best]) best = k;
-      DenseQ& q = l < nd ? model.mlps_q8[m].density[l] : model.mlps_q8[m].color[l - nd];
+      DenseQ& q = mlp_layer(model.mlps_q8[m], l);
       const CalLayer& c = l < nd ? mlps[m].density[l] : mlps[m].color[l - nd];
       ++report.layers;
       if (best != -kStepMin) {

@@ -70,6 +70,11 @@ void fake_quantize_mlp(const MlpLayout& layout, const float* params, float* out)
 // a parameter multiplied by s has its gradient divided by s.
 void equalize_mlp(const MlpLayout& layout, float strength, float* params, float* adam_m, float* adam_v);
 
+// Layer k of a quantized MLP in the layout's order: density layers, then colour.
+inline DenseQ& mlp_layer(MlpQ& q, size_t k) {
+  return k < q.density.size() ? q.density[k] : q.color[k - q.density.size()];
+}
+
 // The INT8 MLP. layer_in_max_abs holds, per layer (density then colour), the
 // largest |input| seen; in_scale = that / 127 (1 when zero).
 MlpQ quantize_mlp(const MlpLayout& layout, const float* params, const std::vector<float>& layer_in_max_abs);

@@ -223,14 +223,11 @@ void Trainer::State::update_fake_quantized_mlps() {
 // largest input seen / 127): the later steps of the quantization-aware phase
 // round the activations to these, so the MLPs learn the chip's arithmetic.
 void Trainer::State::refresh_activation_steps() {
-  const SceneModel m = make_model(true, false);
-  const size_t nd = layout.density.size(), n_layers = nd + layout.color.size();
+  SceneModel m = make_model(true, false);
+  const size_t n_layers = layout.density.size() + layout.color.size();
   act_steps.assign(size_t(n_mlps) * n_layers, 1.f);
-  for (size_t mi = 0; mi < m.mlps_q8.size(); ++mi) {
-    const MlpQ& q = m.mlps_q8[mi];
-    for (size_t k = 0; k < n_layers; ++k)
-      act_steps[mi * n_layers + k] = k < nd ? q.density[k].in_scale : q.color[k - nd].in_scale;
-  }
+  for (size_t mi = 0; mi < m.mlps_q8.size(); ++mi)
+    for (size_t k = 0; k < n_layers; ++k) act_steps[mi * n_layers + k] = mlp_layer(m.mlps_q8[mi], k).in_scale;
 }
 
 AdamSettings Trainer::State::adam_settings() const { return {cfg.adam_beta1, cfg.adam_beta2, cfg.adam_eps}; }

@@ -118,12 +118,9 @@ SceneModel Trainer::State::make_model(bool quantized, bool trained_steps) const 
   m.finalize();
   if (quantized && trained_steps && !act_steps.empty()) {
     // The activation steps the quantization-aware phase trained with.
-    const size_t nd = layout.density.size(), n_layers = nd + layout.color.size();
+    const size_t n_layers = layout.density.size() + layout.color.size();
     for (size_t mi = 0; mi < m.mlps_q8.size(); ++mi)
-      for (size_t k = 0; k < n_layers; ++k) {
-        DenseQ& l = k < nd ? m.mlps_q8[mi].density[k] : m.mlps_q8[mi].color[k - nd];
-        l.in_scale = act_steps[mi * n_layers + k];
-      }
+      for (size_t k = 0; k < n_layers; ++k) mlp_layer(m.mlps_q8[mi], k).in_scale = act_steps[mi * n_layers + k];
     meta["activation_steps"] = "trained (qat_activations)";
     m.metadata_json = meta.dump();
   } else if (quantized && cfg.calibrate_activations) {
