@@ -12,6 +12,7 @@
 #include "chip/zorg.h"
 #include "core/error.h"
 #include "core/file_io.h"
+#include "core/yaml_read.h"
 
 namespace edrnr {
 
@@ -42,95 +43,69 @@ void validate(const ChipConfig& c) {
   edrnr::validate(c.numerics);
 }
 
-namespace {
-
-template <class T>
-T scalar(const YAML::Node& v, const std::string& where, const char* expected) {
-  if (!v.IsScalar()) fail("{}: expected {}", where, expected);
-  try {
-    return v.as<T>();
-  } catch (const YAML::Exception&) {
-    fail("{}: '{}' is not {}", where, v.Scalar(), expected);
-  }
-}
-
-template <class F>
-void for_each_key(const YAML::Node& node, const std::string& where, std::initializer_list<const char*> known, F f) {
-  if (!node.IsMap()) fail("{}: expected a map", where);
-  for (const auto& kv : node) {
-    const std::string key = kv.first.as<std::string>();
-    if (std::find_if(known.begin(), known.end(), [&](const char* k) { return key == k; }) == known.end()) {
-      std::string list;
-      for (const char* k : known) list += std::string(list.empty() ? "" : ", ") + k;
-      fail("{}: unknown key '{}' (known: {})", where, key, list);
-    }
-    f(key, kv.second, where + "." + key);
-  }
-}
-
-}  // namespace
-
 ChipConfig chip_config_from_yaml(const YAML::Node& node, std::string_view where_view) {
   const std::string where(where_view);
   ChipConfig c;
   if (!node || node.IsNull()) return c;
-  for_each_key(
+  yaml_for_each_key(
       node, where,
       {"rp_buffer_capacity", "rp_rob", "ooo_queue_depth", "feature_cache", "mlp_cache_bytes", "micro_grid_cache_bytes",
        "functional_fill_latency_issues", "render", "switches", "numerics", "simulator"},
       [&](const std::string& key, const YAML::Node& v, const std::string& at) {
-        if (key == "rp_buffer_capacity") c.rp_buffer_capacity = scalar<int>(v, at, "an integer");
-        if (key == "ooo_queue_depth") c.ooo_queue_depth = scalar<int>(v, at, "an integer");
-        if (key == "mlp_cache_bytes") c.mlp_cache_bytes = scalar<int64_t>(v, at, "an integer");
-        if (key == "micro_grid_cache_bytes") c.micro_grid_cache_bytes = scalar<int64_t>(v, at, "an integer");
+        if (key == "rp_buffer_capacity") c.rp_buffer_capacity = yaml_scalar<int>(v, at, "an integer");
+        if (key == "ooo_queue_depth") c.ooo_queue_depth = yaml_scalar<int>(v, at, "an integer");
+        if (key == "mlp_cache_bytes") c.mlp_cache_bytes = yaml_scalar<int64_t>(v, at, "an integer");
+        if (key == "micro_grid_cache_bytes") c.micro_grid_cache_bytes = yaml_scalar<int64_t>(v, at, "an integer");
         if (key == "functional_fill_latency_issues")
-          c.functional_fill_latency_issues = scalar<int>(v, at, "an integer");
+          c.functional_fill_latency_issues = yaml_scalar<int>(v, at, "an integer");
         if (key == "rp_rob")
-          for_each_key(v, at, {"entries", "entry_depth", "recent_tags", "tag_switch", "switch_when"},
-                       [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                         if (k == "switch_when") {
-                           const std::string w = scalar<std::string>(x, a, "retired or idle");
-                           if (w != "retired" && w != "idle") fail("{}: '{}' is not retired or idle", a, w);
-                           c.rp_rob.switch_when_idle = w == "idle";
-                           return;
-                         }
-                         if (k == "tag_switch") {
-                           c.rp_rob.tag_switch = parse_tag_switch_rule(scalar<std::string>(x, a, "a name"), a);
-                           return;
-                         }
-                         int val = scalar<int>(x, a, "an integer");
-                         if (k == "entries") c.rp_rob.entries = val;
-                         if (k == "entry_depth") c.rp_rob.entry_depth = val;
-                         if (k == "recent_tags") c.rp_rob.recent_tags = val;
-                       });
+          yaml_for_each_key(v, at, {"entries", "entry_depth", "recent_tags", "tag_switch", "switch_when"},
+                            [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                              if (k == "switch_when") {
+                                const std::string w = yaml_scalar<std::string>(x, a, "retired or idle");
+                                if (w != "retired" && w != "idle") fail("{}: '{}' is not retired or idle", a, w);
+                                c.rp_rob.switch_when_idle = w == "idle";
+                                return;
+                              }
+                              if (k == "tag_switch") {
+                                c.rp_rob.tag_switch =
+                                    parse_tag_switch_rule(yaml_scalar<std::string>(x, a, "a name"), a);
+                                return;
+                              }
+                              int val = yaml_scalar<int>(x, a, "an integer");
+                              if (k == "entries") c.rp_rob.entries = val;
+                              if (k == "entry_depth") c.rp_rob.entry_depth = val;
+                              if (k == "recent_tags") c.rp_rob.recent_tags = val;
+                            });
         if (key == "feature_cache")
-          for_each_key(v, at, {"bytes", "mshr_entries", "bank_mapping"},
-                       [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                         if (k == "bytes") c.feature_cache_bytes = scalar<int64_t>(x, a, "an integer");
-                         if (k == "mshr_entries") c.mshr_entries = scalar<int>(x, a, "an integer");
-                         if (k == "bank_mapping")
-                           c.bank_mapping = parse_bank_mapping(scalar<std::string>(x, a, "a name"), a);
-                       });
+          yaml_for_each_key(v, at, {"bytes", "mshr_entries", "bank_mapping"},
+                            [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                              if (k == "bytes") c.feature_cache_bytes = yaml_scalar<int64_t>(x, a, "an integer");
+                              if (k == "mshr_entries") c.mshr_entries = yaml_scalar<int>(x, a, "an integer");
+                              if (k == "bank_mapping")
+                                c.bank_mapping = parse_bank_mapping(yaml_scalar<std::string>(x, a, "a name"), a);
+                            });
         if (key == "render")
-          for_each_key(v, at, {"step_micro", "transmittance_min", "background"},
-                       [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                         if (k == "step_micro") c.step_micro = scalar<float>(x, a, "a number");
-                         if (k == "transmittance_min") c.transmittance_min = scalar<float>(x, a, "a number");
-                         if (k == "background") {
-                           if (!x.IsSequence() || x.size() != 3) fail("{}: expected [r, g, b]", a);
-                           for (int i = 0; i < 3; ++i) c.background[i] = scalar<float>(x[size_t(i)], a, "a number");
-                         }
-                       });
+          yaml_for_each_key(v, at, {"step_micro", "transmittance_min", "background"},
+                            [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                              if (k == "step_micro") c.step_micro = yaml_scalar<float>(x, a, "a number");
+                              if (k == "transmittance_min") c.transmittance_min = yaml_scalar<float>(x, a, "a number");
+                              if (k == "background") {
+                                if (!x.IsSequence() || x.size() != 3) fail("{}: expected [r, g, b]", a);
+                                for (int i = 0; i < 3; ++i)
+                                  c.background[i] = yaml_scalar<float>(x[size_t(i)], a, "a number");
+                              }
+                            });
         if (key == "switches")
-          for_each_key(v, at, {"z_order", "aabb", "lag_first", "rp_reorder", "ooo_issue"},
-                       [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                         const bool b = scalar<bool>(x, a, "true or false");
-                         if (k == "z_order") c.switches.z_order = b;
-                         if (k == "aabb") c.switches.aabb = b;
-                         if (k == "lag_first") c.switches.lag_first = b;
-                         if (k == "rp_reorder") c.switches.rp_reorder = b;
-                         if (k == "ooo_issue") c.switches.ooo_issue = b;
-                       });
+          yaml_for_each_key(v, at, {"z_order", "aabb", "lag_first", "rp_reorder", "ooo_issue"},
+                            [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                              const bool b = yaml_scalar<bool>(x, a, "true or false");
+                              if (k == "z_order") c.switches.z_order = b;
+                              if (k == "aabb") c.switches.aabb = b;
+                              if (k == "lag_first") c.switches.lag_first = b;
+                              if (k == "rp_reorder") c.switches.rp_reorder = b;
+                              if (k == "ooo_issue") c.switches.ooo_issue = b;
+                            });
         if (key == "numerics") c.numerics = numerics_from_yaml(v, at);
         // "simulator": timing, memory and energy of the cycle simulator
         // (sim/sim_config.h); the functional model does not use it.

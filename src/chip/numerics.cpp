@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "core/error.h"
+#include "core/yaml_read.h"
 
 namespace edrnr {
 
@@ -55,12 +56,7 @@ constexpr std::array<FloatField, 2> kFloatFields{{
 
 template <class T>
 T read_scalar(const YAML::Node& v, std::string_view where, std::string_view key, const char* expected) {
-  if (!v.IsScalar()) fail("{}.{}: expected {}", where, key, expected);
-  try {
-    return v.as<T>();
-  } catch (const YAML::Exception&) {
-    fail("{}.{}: '{}' is not {}", where, key, v.Scalar(), expected);
-  }
+  return yaml_scalar<T>(v, std::string(where) + "." + std::string(key), expected);
 }
 
 std::optional<fx::Rounding> parse_rounding(std::string_view s) {

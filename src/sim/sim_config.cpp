@@ -6,6 +6,7 @@
 #include "core/error.h"
 #include "core/file_io.h"
 #include "core/limits.h"
+#include "core/yaml_read.h"
 
 namespace edrnr::sim {
 
@@ -15,100 +16,76 @@ namespace fs = std::filesystem;
 
 constexpr const char* kDefaultDramPreset = "ddr3-1600-4gb-x16-16bit";
 
-template <class T>
-T scalar(const YAML::Node& v, const std::string& where, const char* expected) {
-  if (!v.IsScalar()) fail("{}: expected {}", where, expected);
-  try {
-    return v.as<T>();
-  } catch (const YAML::Exception&) {
-    fail("{}: '{}' is not {}", where, v.Scalar(), expected);
-  }
-}
-
-int integer(const YAML::Node& v, const std::string& where) { return scalar<int>(v, where, "an integer"); }
+int integer(const YAML::Node& v, const std::string& where) { return yaml_scalar<int>(v, where, "an integer"); }
 uint64_t count(const YAML::Node& v, const std::string& where) {
-  const int64_t x = scalar<int64_t>(v, where, "an integer");
+  const int64_t x = yaml_scalar<int64_t>(v, where, "an integer");
   if (x < 0) fail("{}: {} must not be negative", where, x);
   return uint64_t(x);
 }
-double number(const YAML::Node& v, const std::string& where) { return scalar<double>(v, where, "a number"); }
-bool boolean(const YAML::Node& v, const std::string& where) { return scalar<bool>(v, where, "true or false"); }
-
-// Calls f(key, value, "where.key") for each entry of a map; an unknown key is an Error.
-template <class F>
-void for_each_key(const YAML::Node& node, const std::string& where, std::initializer_list<const char*> known, F f) {
-  if (!node.IsMap()) fail("{}: expected a map", where);
-  for (const auto& kv : node) {
-    const std::string key = kv.first.as<std::string>();
-    if (std::none_of(known.begin(), known.end(), [&](const char* k) { return key == k; })) {
-      std::string list;
-      for (const char* k : known) list += std::string(list.empty() ? "" : ", ") + k;
-      fail("{}: unknown key '{}' (known: {})", where, key, list);
-    }
-    f(key, kv.second, where + "." + key);
-  }
-}
+double number(const YAML::Node& v, const std::string& where) { return yaml_scalar<double>(v, where, "a number"); }
+bool boolean(const YAML::Node& v, const std::string& where) { return yaml_scalar<bool>(v, where, "true or false"); }
 
 void read_timing(const YAML::Node& node, const std::string& where, SimTiming& t) {
-  for_each_key(node, where, {"front_end", "ctu", "ftu", "cfiu", "tme", "vru"},
-               [&](const std::string& key, const YAML::Node& v, const std::string& at) {
-                 if (key == "ctu")
-                   for_each_key(v, at, {"cycles_per_iteration"},
-                                [&](const std::string&, const YAML::Node& x, const std::string& a) {
-                                  t.ctu_cycles_per_iteration = integer(x, a);
-                                });
-                 if (key == "ftu")
-                   for_each_key(v, at, {"cycles_per_iteration", "lanes"},
-                                [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                                  if (k == "cycles_per_iteration") t.ftu_cycles_per_iteration = integer(x, a);
-                                  if (k == "lanes") t.ftu_lanes = integer(x, a);
-                                });
-                 if (key == "front_end")
-                   for_each_key(v, at, {"zorg_cycles_per_rp", "tsps_position_evals_per_cycle", "latency_cycles"},
-                                [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                                  if (k == "zorg_cycles_per_rp") t.zorg_cycles_per_rp = integer(x, a);
-                                  if (k == "tsps_position_evals_per_cycle")
-                                    t.tsps_position_evals_per_cycle = integer(x, a);
-                                  if (k == "latency_cycles") t.front_end_latency_cycles = integer(x, a);
-                                });
-                 if (key == "cfiu")
-                   for_each_key(v, at, {"cycles_per_sample", "latency_cycles", "fifo_slots"},
-                                [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                                  if (k == "cycles_per_sample") t.cfiu_cycles_per_sample = integer(x, a);
-                                  if (k == "latency_cycles") t.cfiu_latency_cycles = integer(x, a);
-                                  if (k == "fifo_slots") t.cfiu_fifo_slots = integer(x, a);
-                                });
-                 if (key == "tme")
-                   for_each_key(v, at,
-                                {"macs_per_cycle", "latency_cycles", "fifo_slots", "weight_load_bytes_per_cycle",
-                                 "weight_buffers"},
-                                [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                                  if (k == "macs_per_cycle") t.tme_macs_per_cycle = integer(x, a);
-                                  if (k == "latency_cycles") t.tme_latency_cycles = integer(x, a);
-                                  if (k == "fifo_slots") t.tme_fifo_slots = integer(x, a);
-                                  if (k == "weight_buffers") t.tme_weight_buffers = integer(x, a);
-                                  if (k == "weight_load_bytes_per_cycle")
-                                    t.tme_weight_load_bytes_per_cycle = integer(x, a);
-                                });
-                 if (key == "vru")
-                   for_each_key(v, at, {"cycles_per_sample", "latency_cycles"},
-                                [&](const std::string& k, const YAML::Node& x, const std::string& a) {
-                                  if (k == "cycles_per_sample") t.vru_cycles_per_sample = integer(x, a);
-                                  if (k == "latency_cycles") t.vru_latency_cycles = integer(x, a);
-                                });
-               });
+  yaml_for_each_key(
+      node, where, {"front_end", "ctu", "ftu", "cfiu", "tme", "vru"},
+      [&](const std::string& key, const YAML::Node& v, const std::string& at) {
+        if (key == "ctu")
+          yaml_for_each_key(v, at, {"cycles_per_iteration"},
+                            [&](const std::string&, const YAML::Node& x, const std::string& a) {
+                              t.ctu_cycles_per_iteration = integer(x, a);
+                            });
+        if (key == "ftu")
+          yaml_for_each_key(v, at, {"cycles_per_iteration", "lanes"},
+                            [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                              if (k == "cycles_per_iteration") t.ftu_cycles_per_iteration = integer(x, a);
+                              if (k == "lanes") t.ftu_lanes = integer(x, a);
+                            });
+        if (key == "front_end")
+          yaml_for_each_key(v, at, {"zorg_cycles_per_rp", "tsps_position_evals_per_cycle", "latency_cycles"},
+                            [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                              if (k == "zorg_cycles_per_rp") t.zorg_cycles_per_rp = integer(x, a);
+                              if (k == "tsps_position_evals_per_cycle") t.tsps_position_evals_per_cycle = integer(x, a);
+                              if (k == "latency_cycles") t.front_end_latency_cycles = integer(x, a);
+                            });
+        if (key == "cfiu")
+          yaml_for_each_key(v, at, {"cycles_per_sample", "latency_cycles", "fifo_slots"},
+                            [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                              if (k == "cycles_per_sample") t.cfiu_cycles_per_sample = integer(x, a);
+                              if (k == "latency_cycles") t.cfiu_latency_cycles = integer(x, a);
+                              if (k == "fifo_slots") t.cfiu_fifo_slots = integer(x, a);
+                            });
+        if (key == "tme")
+          yaml_for_each_key(
+              v, at,
+              {"macs_per_cycle", "latency_cycles", "fifo_slots", "weight_load_bytes_per_cycle", "weight_buffers"},
+              [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                if (k == "macs_per_cycle") t.tme_macs_per_cycle = integer(x, a);
+                if (k == "latency_cycles") t.tme_latency_cycles = integer(x, a);
+                if (k == "fifo_slots") t.tme_fifo_slots = integer(x, a);
+                if (k == "weight_buffers") t.tme_weight_buffers = integer(x, a);
+                if (k == "weight_load_bytes_per_cycle") t.tme_weight_load_bytes_per_cycle = integer(x, a);
+              });
+        if (key == "vru")
+          yaml_for_each_key(v, at, {"cycles_per_sample", "latency_cycles"},
+                            [&](const std::string& k, const YAML::Node& x, const std::string& a) {
+                              if (k == "cycles_per_sample") t.vru_cycles_per_sample = integer(x, a);
+                              if (k == "latency_cycles") t.vru_latency_cycles = integer(x, a);
+                            });
+      });
 }
 
 void read_cache(const YAML::Node& node, const std::string& where, SimCacheConfig& c) {
-  for_each_key(node, where, {"line_bytes", "ways", "replacement", "random_seed", "mshr_entries", "hit_latency_cycles"},
-               [&](const std::string& k, const YAML::Node& v, const std::string& at) {
-                 if (k == "line_bytes") c.line_bytes = count(v, at);
-                 if (k == "ways") c.ways = count(v, at);
-                 if (k == "replacement") c.replacement = parse_replacement(scalar<std::string>(v, at, "a name"), at);
-                 if (k == "random_seed") c.random_seed = count(v, at);
-                 if (k == "mshr_entries") c.mshr_entries = size_t(count(v, at));
-                 if (k == "hit_latency_cycles") c.hit_latency_cycles = count(v, at);
-               });
+  yaml_for_each_key(node, where,
+                    {"line_bytes", "ways", "replacement", "random_seed", "mshr_entries", "hit_latency_cycles"},
+                    [&](const std::string& k, const YAML::Node& v, const std::string& at) {
+                      if (k == "line_bytes") c.line_bytes = count(v, at);
+                      if (k == "ways") c.ways = count(v, at);
+                      if (k == "replacement")
+                        c.replacement = parse_replacement(yaml_scalar<std::string>(v, at, "a name"), at);
+                      if (k == "random_seed") c.random_seed = count(v, at);
+                      if (k == "mshr_entries") c.mshr_entries = size_t(count(v, at));
+                      if (k == "hit_latency_cycles") c.hit_latency_cycles = count(v, at);
+                    });
 }
 
 fs::path resolve(const fs::path& p, const fs::path& base_dir) {
@@ -125,7 +102,7 @@ void read_dram(const YAML::Node& v, const std::string& at, const fs::path& base_
     m.dram_source = "inline";
     return;
   }
-  const std::string name = scalar<std::string>(v, at, "a DRAM preset name, a path or a map");
+  const std::string name = yaml_scalar<std::string>(v, at, "a DRAM preset name, a path or a map");
   std::vector<fs::path> dirs;
   if (!base_dir.empty()) dirs.push_back(base_dir / ".." / "dram");
   dirs.insert(dirs.end(), search_dirs.begin(), search_dirs.end());
@@ -142,50 +119,50 @@ void read_dram(const YAML::Node& v, const std::string& at, const fs::path& base_
 
 void read_memory(const YAML::Node& node, const std::string& where, const fs::path& base_dir,
                  const std::vector<fs::path>& search_dirs, SimMemory& m) {
-  for_each_key(node, where,
-               {"dram", "max_request_bytes", "preload_bitmaps", "write_output", "output_record_bytes",
-                "micro_grid_cache", "mlp_cache", "mlp_prefetch"},
-               [&](const std::string& k, const YAML::Node& v, const std::string& at) {
-                 if (k == "dram") read_dram(v, at, base_dir, search_dirs, m);
-                 if (k == "max_request_bytes") m.max_request_bytes = uint32_t(count(v, at));
-                 if (k == "preload_bitmaps") m.preload_bitmaps = boolean(v, at);
-                 if (k == "write_output") m.write_output = boolean(v, at);
-                 if (k == "mlp_prefetch") m.mlp_prefetch = boolean(v, at);
-                 if (k == "output_record_bytes") m.output_record_bytes = uint32_t(count(v, at));
-                 if (k == "micro_grid_cache") read_cache(v, at, m.micro_grid_cache);
-                 if (k == "mlp_cache") read_cache(v, at, m.mlp_cache);
-               });
+  yaml_for_each_key(node, where,
+                    {"dram", "max_request_bytes", "preload_bitmaps", "write_output", "output_record_bytes",
+                     "micro_grid_cache", "mlp_cache", "mlp_prefetch"},
+                    [&](const std::string& k, const YAML::Node& v, const std::string& at) {
+                      if (k == "dram") read_dram(v, at, base_dir, search_dirs, m);
+                      if (k == "max_request_bytes") m.max_request_bytes = uint32_t(count(v, at));
+                      if (k == "preload_bitmaps") m.preload_bitmaps = boolean(v, at);
+                      if (k == "write_output") m.write_output = boolean(v, at);
+                      if (k == "mlp_prefetch") m.mlp_prefetch = boolean(v, at);
+                      if (k == "output_record_bytes") m.output_record_bytes = uint32_t(count(v, at));
+                      if (k == "micro_grid_cache") read_cache(v, at, m.micro_grid_cache);
+                      if (k == "mlp_cache") read_cache(v, at, m.mlp_cache);
+                    });
 }
 
 void read_energy(const YAML::Node& node, const std::string& where, const fs::path& base_dir, SimEnergy& e) {
-  for_each_key(node, where, {"events", "leakage", "leakage_voltage_exponent", "dram"},
-               [&](const std::string& k, const YAML::Node& v, const std::string& at) {
-                 if (k == "events") e.events_csv = resolve(scalar<std::string>(v, at, "a path"), base_dir);
-                 if (k == "leakage") e.leakage_csv = resolve(scalar<std::string>(v, at, "a path"), base_dir);
-                 if (k == "leakage_voltage_exponent") e.leakage_voltage_exponent = number(v, at);
-                 if (k == "dram") {
-                   const std::string s = scalar<std::string>(v, at, "events, model or access");
-                   if (s == "events")
-                     e.dram = DramEnergySource::Events;
-                   else if (s == "model")
-                     e.dram = DramEnergySource::Model;
-                   else if (s == "access")
-                     e.dram = DramEnergySource::Access;
-                   else
-                     fail("{}: '{}' is not events, model or access", at, s);
-                 }
-               });
+  yaml_for_each_key(node, where, {"events", "leakage", "leakage_voltage_exponent", "dram"},
+                    [&](const std::string& k, const YAML::Node& v, const std::string& at) {
+                      if (k == "events") e.events_csv = resolve(yaml_scalar<std::string>(v, at, "a path"), base_dir);
+                      if (k == "leakage") e.leakage_csv = resolve(yaml_scalar<std::string>(v, at, "a path"), base_dir);
+                      if (k == "leakage_voltage_exponent") e.leakage_voltage_exponent = number(v, at);
+                      if (k == "dram") {
+                        const std::string s = yaml_scalar<std::string>(v, at, "events, model or access");
+                        if (s == "events")
+                          e.dram = DramEnergySource::Events;
+                        else if (s == "model")
+                          e.dram = DramEnergySource::Model;
+                        else if (s == "access")
+                          e.dram = DramEnergySource::Access;
+                        else
+                          fail("{}: '{}' is not events, model or access", at, s);
+                      }
+                    });
 }
 
 void read_sram_budget(const YAML::Node& node, const std::string& where, SramBudgetLimits& b) {
-  for_each_key(node, where, {"micro_grid", "feature", "mlp", "others"},
-               [&](const std::string& k, const YAML::Node& v, const std::string& at) {
-                 const uint64_t n = uint64_t(count(v, at));
-                 if (k == "micro_grid") b.micro_grid_bytes = n;
-                 if (k == "feature") b.feature_bytes = n;
-                 if (k == "mlp") b.mlp_bytes = n;
-                 if (k == "others") b.others_bytes = n;
-               });
+  yaml_for_each_key(node, where, {"micro_grid", "feature", "mlp", "others"},
+                    [&](const std::string& k, const YAML::Node& v, const std::string& at) {
+                      const uint64_t n = uint64_t(count(v, at));
+                      if (k == "micro_grid") b.micro_grid_bytes = n;
+                      if (k == "feature") b.feature_bytes = n;
+                      if (k == "mlp") b.mlp_bytes = n;
+                      if (k == "others") b.others_bytes = n;
+                    });
 }
 
 void read_operating_points(const YAML::Node& node, const std::string& where, std::vector<OperatingPoint>& points) {
@@ -195,11 +172,11 @@ void read_operating_points(const YAML::Node& node, const std::string& where, std
     const std::string at = fmt::format("{}[{}]", where, i);
     OperatingPoint p;
     bool has_clock = false, has_voltage = false;
-    for_each_key(node[i], at, {"clock_MHz", "voltage_V"},
-                 [&](const std::string& k, const YAML::Node& v, const std::string& a) {
-                   if (k == "clock_MHz") p.frequency_MHz = number(v, a), has_clock = true;
-                   if (k == "voltage_V") p.voltage_V = number(v, a), has_voltage = true;
-                 });
+    yaml_for_each_key(node[i], at, {"clock_MHz", "voltage_V"},
+                      [&](const std::string& k, const YAML::Node& v, const std::string& a) {
+                        if (k == "clock_MHz") p.frequency_MHz = number(v, a), has_clock = true;
+                        if (k == "voltage_V") p.voltage_V = number(v, a), has_voltage = true;
+                      });
     if (!has_clock || !has_voltage) fail("{}: needs clock_MHz and voltage_V", at);
     points.push_back(p);
   }
@@ -332,21 +309,22 @@ SimConfig sim_config_from_yaml(const YAML::Node& node, std::string_view where_vi
   if (has_simulator && s.IsNull())
     fail("{}.simulator: the section is empty; give a map of simulator settings or leave it out", where);
   if (has_simulator) {
-    for_each_key(s, where + ".simulator",
-                 {"clock_MHz", "timing", "memory", "energy", "operating_points", "statistics", "sram_budget_bytes"},
-                 [&](const std::string& k, const YAML::Node& v, const std::string& at) {
-                   if (k == "clock_MHz") c.clock_MHz = number(v, at);
-                   if (k == "timing") read_timing(v, at, c.timing);
-                   if (k == "memory") read_memory(v, at, base_dir, dram_search_dirs, c.memory);
-                   if (k == "energy") read_energy(v, at, base_dir, c.energy);
-                   if (k == "operating_points") read_operating_points(v, at, c.operating_points);
-                   if (k == "sram_budget_bytes") read_sram_budget(v, at, c.sram_budget);
-                   if (k == "statistics")
-                     for_each_key(v, at, {"hit_rate_window_cycles"},
-                                  [&](const std::string&, const YAML::Node& x, const std::string& a) {
-                                    c.hit_rate_window_cycles = count(x, a);
-                                  });
-                 });
+    yaml_for_each_key(
+        s, where + ".simulator",
+        {"clock_MHz", "timing", "memory", "energy", "operating_points", "statistics", "sram_budget_bytes"},
+        [&](const std::string& k, const YAML::Node& v, const std::string& at) {
+          if (k == "clock_MHz") c.clock_MHz = number(v, at);
+          if (k == "timing") read_timing(v, at, c.timing);
+          if (k == "memory") read_memory(v, at, base_dir, dram_search_dirs, c.memory);
+          if (k == "energy") read_energy(v, at, base_dir, c.energy);
+          if (k == "operating_points") read_operating_points(v, at, c.operating_points);
+          if (k == "sram_budget_bytes") read_sram_budget(v, at, c.sram_budget);
+          if (k == "statistics")
+            yaml_for_each_key(v, at, {"hit_rate_window_cycles"},
+                              [&](const std::string&, const YAML::Node& x, const std::string& a) {
+                                c.hit_rate_window_cycles = count(x, a);
+                              });
+        });
   }
   // Defaults for what the preset leaves out: the DRAM part and the energy
   // tables of configs/edr_nr_40nm.yaml, looked up beside the preset.
