@@ -48,13 +48,14 @@ struct TrainConfig {
   // their cost relative to the steps the plan measured (plan_iters below):
   // a main-phase step after the plan costs plan_cost_main of them, a per-CV
   // step plan_cost_per_cv (one level of 16 channels instead of four of 4), a
-  // quantization-aware step plan_cost_qat (rounding on top), and
+  // quantization-aware step plan_cost_qat (rounding on top, and with
+  // qat_activations the activations and their refreshes: 1.4; 1.1 without), and
   // plan_reserve of the time left is kept for checkpoints, the export and the
   // machine's drift; the defaults are the slower of two measured mic runs
   // (docs/training.md, "The time budget").
   float plan_cost_main = 1.0f;
   float plan_cost_per_cv = 0.85f;
-  float plan_cost_qat = 1.1f;
+  float plan_cost_qat = 1.4f;
   float plan_reserve = 0.05f;
   float per_cv_fraction = 0.45f;  // share of steps training per-CV MLPs in float
   float qat_fraction = 0.1f;      // share of steps of quantization-aware training (last)
@@ -132,7 +133,7 @@ struct TrainConfig {
                                       // less INT8 error; not with mlp_tie_weight
   bool calibrate_activations = true;  // the exported INT8 MLPs' input steps chosen from the training rays'
                                       // samples (train/calibrate.h) instead of the largest input seen
-  bool qat_activations = false;       // the quantization-aware phase also rounds every MLP layer's input to the
+  bool qat_activations = true;        // the quantization-aware phase also rounds every MLP layer's input to the
                                       // chip's INT8 steps (the steps the export would write, refreshed below)
   int qat_activations_every = 512;    // steps between refreshes of those steps (the first after
                                       // quant_refit_every steps of the phase, once the inputs' ranges are seen)

@@ -52,7 +52,7 @@ class Outputs : public CliTest {
       write_file_atomic(p, std::string("micro_res: 32\nlevels: [8, 16, 32]\nbatch_samples: 2048\nmin_rays: 32\n"
                                        "max_rays: 512\nper_cv_fraction: 0.15\nqat_fraction: 0.15\n"
                                        "occupancy_every: 8\naabb_start: 64\naabb_every: 64\nlr_warmup: 20\n"
-                                       "plan_step: 120\nprune_cv_weight: 0\n"));
+                                       "plan_step: 120\nprune_cv_weight: 0\nqat_activations: false\n"));
     return p.string();
   }
 

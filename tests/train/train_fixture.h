@@ -62,6 +62,9 @@ inline TrainConfig small_config() {
   c.seed = 7;
   // A few coarse voxels, each part of the object: none is a floater.
   c.prune_cv_weight = 0.f;
+  // Float activations in the quantization-aware phase: the tests of
+  // qat_activations turn it on themselves.
+  c.qat_activations = false;
   return c;
 }
 

@@ -512,7 +512,7 @@ TEST(Train, DefaultPresetIsTheBuiltInDefaultsAndTheEarlierPresetsWithTheirOverla
   TrainConfig overlays = base2;
   for (const char* o :
        {"lr-2x-per-cv-0.45.yaml", "mlp-equalize-0.5.yaml", "prune-cv-0.2.yaml", "calibrate-activations.yaml",
-        "prune-parts-0.01.yaml", "qat-lr-0.33.yaml", "lr-final-0.2.yaml", "fit-box-max-21000.yaml"})
+        "prune-parts-0.01.yaml", "qat-lr-0.33.yaml", "lr-final-0.2.yaml", "fit-box-max-21000.yaml", "qat-activations.yaml"})
     overlays = load_train_config(ablation / o, overlays);
   EXPECT_EQ(to_yaml(overlays), to_yaml(preset));
 }
