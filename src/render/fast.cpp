@@ -138,14 +138,14 @@ double since(Clock::time_point& t) {
 
 class TileRenderer {
  public:
+  // tables: the INT8 path's activations for sample_spacing(model, s.step_micro).
   TileRenderer(const FastModel& fm, const FastSkipGrid& skip, const Camera& camera, const RenderSettings& s,
-               Image& image, bool profile)
-      : fm_(fm), m_(*fm.model), skip_(skip), camera_(camera), s_(s), image_(image), profile_(profile) {
+               const FastActivationTables& tables, int threads, Image& image, bool profile)
+      : fm_(fm), m_(*fm.model), skip_(skip), camera_(camera), s_(s), image_(image), profile_(profile), tables_(tables) {
     cells_x_ = (camera.width + kStartCell - 1) / kStartCell;
-    start_ =
-        tile_start_distances(m_, skip_, camera_, kStartCell, cells_x_, (camera.height + kStartCell - 1) / kStartCell);
+    start_ = tile_start_distances(m_, skip_, camera_, kStartCell, cells_x_,
+                                  (camera.height + kStartCell - 1) / kStartCell, threads);
     delta_ = sample_spacing(m_, s.step_micro);
-    tables_ = fast_activation_tables(fm_, delta_);
     transmittance_min_ = std::max(s.transmittance_min, s.fast_transmittance_min);
     aabb_ = {m_.object_aabb.lo.cast<double>(), m_.object_aabb.hi.cast<double>()};
   }
@@ -396,8 +396,8 @@ class TileRenderer {
   const RenderSettings& s_;
   Image& image_;
   bool profile_;
+  const FastActivationTables& tables_;  // the INT8 path's activations for delta_
   float delta_ = 0;
-  FastActivationTables tables_;  // the INT8 path's activations for delta_
   float transmittance_min_ = 0;  // the rays' end (RenderSettings::fast_transmittance_min)
   int cells_x_ = 0;
   std::vector<double> start_;  // per cell of kStartCell pixels, row by row: where its rays may start
@@ -420,6 +420,13 @@ FastRenderer::FastRenderer(const SceneModel& model, ModelForm form, FastPath pat
   skip_ = std::make_shared<const FastSkipGrid>(model);
 }
 
+std::shared_ptr<const FastActivationTables> FastRenderer::activation_tables(float delta) const {
+  const std::lock_guard<std::mutex> lock(tables_->mutex);
+  if (!tables_->tables || tables_->tables->delta != delta)
+    tables_->tables = std::make_shared<const FastActivationTables>(fast_activation_tables(fm_, delta));
+  return tables_->tables;
+}
+
 Image FastRenderer::render(const Camera& camera, const RenderSettings& settings, RenderStats* stats,
                            FastProfile* profile) const {
   check_render_inputs(camera, settings);
@@ -427,7 +434,9 @@ Image FastRenderer::render(const Camera& camera, const RenderSettings& settings,
   Image image(W, H, 3);
   const std::vector<Tile> tiles = z_order_tiles(W, H);
   const int threads = settings.threads > 0 ? settings.threads : omp_get_max_threads();
-  const TileRenderer tr(fm_, *skip_, camera, settings, image, profile != nullptr);
+  const std::shared_ptr<const FastActivationTables> tables =
+      activation_tables(sample_spacing(*fm_.model, settings.step_micro));
+  const TileRenderer tr(fm_, *skip_, camera, settings, *tables, threads, image, profile != nullptr);
   ThreadTotals total;
 #pragma omp parallel num_threads(threads)
   {

@@ -34,6 +34,7 @@
 // model: float rounding of positions and weights, float compositing).
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <string>
 
 #include "core/image.h"
@@ -45,7 +46,8 @@
 
 namespace edrnr {
 
-struct FastSkipGrid;  // render/fast_march.h
+struct FastSkipGrid;          // render/fast_march.h
+struct FastActivationTables;  // render/fast_kernels.h
 
 // Auto: Int8 when the form rendered (RenderSettings::form resolved) is the
 // model's INT4 features and INT8 MLPs, Float otherwise.
@@ -82,8 +84,17 @@ class FastRenderer {
                FastProfile* profile = nullptr) const;
 
  private:
+  // The INT8 path's activation tables for sample spacing delta: made on the
+  // first frame at that spacing and kept (about 0.3 ms each time otherwise).
+  std::shared_ptr<const FastActivationTables> activation_tables(float delta) const;
+
+  struct TableCache {
+    std::mutex mutex;
+    std::shared_ptr<const FastActivationTables> tables;  // the last spacing's
+  };
   FastModel fm_;
   std::shared_ptr<const FastSkipGrid> skip_;
+  std::shared_ptr<TableCache> tables_ = std::make_shared<TableCache>();
 };
 
 // Registers a render's counts and phase times under `prefix` (e.g.

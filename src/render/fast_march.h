@@ -268,7 +268,8 @@ void fast_setup_rays(const SceneModel& model, const FastSkipGrid& skip, const Ca
 // camera does not see wholly in front of it counts for every tile); +inf for
 // a tile no box meets. Samples lie in occupied micro voxels, so no ray has a
 // sample before its tile's distance, and none at all in a tile at +inf.
+// Made on `threads` threads (OpenMP); the result does not depend on them.
 std::vector<double> tile_start_distances(const SceneModel& model, const FastSkipGrid& skip, const Camera& camera,
-                                         int tile, int tiles_x, int tiles_y);
+                                         int tile, int tiles_x, int tiles_y, int threads = 1);
 
 }  // namespace edrnr

@@ -115,6 +115,7 @@ TEST(Fast, TileStartsComeBeforeEverySample) {
     const int tx = (cam.width + tile - 1) / tile, ty = (cam.height + tile - 1) / tile;
     const std::vector<double> start = tile_start_distances(m, skip, cam, tile, tx, ty);
     ASSERT_EQ(start.size(), size_t(tx) * size_t(ty));
+    ASSERT_EQ(tile_start_distances(m, skip, cam, tile, tx, ty, 3), start);  // the same on any thread count
     for (int j = 0; j < ty; ++j)
       for (int i = 0; i < tx; ++i) {
         const double t0 = start[size_t(j) * size_t(tx) + size_t(i)];
