@@ -422,8 +422,10 @@ FastRenderer::FastRenderer(const SceneModel& model, ModelForm form, FastPath pat
 
 std::shared_ptr<const FastActivationTables> FastRenderer::activation_tables(float delta) const {
   const std::lock_guard<std::mutex> lock(tables_->mutex);
-  if (!tables_->tables || tables_->tables->delta != delta)
+  if (!tables_->tables || tables_->delta != delta) {
     tables_->tables = std::make_shared<const FastActivationTables>(fast_activation_tables(fm_, delta));
+    tables_->delta = delta;
+  }
   return tables_->tables;
 }
 

@@ -90,7 +90,8 @@ class FastRenderer {
 
   struct TableCache {
     std::mutex mutex;
-    std::shared_ptr<const FastActivationTables> tables;  // the last spacing's
+    std::shared_ptr<const FastActivationTables> tables;  // the last spacing's (empty on the float path)
+    float delta = 0;                                     // that spacing
   };
   FastModel fm_;
   std::shared_ptr<const FastSkipGrid> skip_;

@@ -319,14 +319,73 @@ void fast_setup_rays(const SceneModel& model, const FastSkipGrid& skip, const Ca
   (model, skip, camera, delta, aabb, x0, y0, tw, n, t_start, marchers, dx, dy, dz, hit_aabb);
 }
 
+namespace {
+
+// What tile_start_distances does for occupied fine voxel (fx, fy, fz): the
+// tiles its box (widened by one micro voxel) may cover get at most its
+// distance from the camera.
+void lower_starts(const SceneModel& model, const Camera& cam, int tile, int tiles_x, int tiles_y, int fx, int fy,
+                  int fz, std::vector<double>& start) {
+  const double inf = std::numeric_limits<double>::infinity();
+  const Vec3d o = cam.origin();
+  const Vec3d lo = model.scene_box.lo.cast<double>();
+  const Vec3d micro = model.micro_voxel_size().cast<double>();
+  // The fine voxel widened by one micro voxel, relative to the camera.
+  const Vec3d b_lo =
+      lo + micro * (Vec3d{double(fx), double(fy), double(fz)} * double(kMicroPerFine) - Vec3d{1, 1, 1}) - o;
+  const Vec3d b_hi = b_lo + micro * double(kMicroPerFine + 2);
+  double d2 = 0;  // squared distance from the camera to the box
+  for (int a = 0; a < 3; ++a) {
+    const double c = std::max({b_lo[a], -b_hi[a], 0.0});
+    d2 += c * c;
+  }
+  const double dist = std::sqrt(d2);
+  // The corners in camera space, projected (u = cx + fx X / -Z, v = cy - fy Y / -Z).
+  double u_lo = inf, u_hi = -inf, v_lo = inf, v_hi = -inf;
+  bool in_front = true;
+  for (int c = 0; c < 8 && in_front; ++c) {
+    const Vec3d w{(c & 1) ? b_hi.x : b_lo.x, (c & 2) ? b_hi.y : b_lo.y, (c & 4) ? b_hi.z : b_lo.z};
+    double p[3];
+    for (int j = 0; j < 3; ++j) p[j] = cam.c2w[j] * w.x + cam.c2w[4 + j] * w.y + cam.c2w[8 + j] * w.z;
+    const double depth = -p[2];
+    if (!(depth > 1e-9 * (std::abs(w.x) + std::abs(w.y) + std::abs(w.z) + 1e-300))) {
+      in_front = false;
+      break;
+    }
+    const double u = cam.cx + cam.fx * p[0] / depth, v = cam.cy - cam.fy * p[1] / depth;
+    u_lo = std::min(u_lo, u);
+    u_hi = std::max(u_hi, u);
+    v_lo = std::min(v_lo, v);
+    v_hi = std::max(v_hi, v);
+  }
+  // Every tile, unless the box lies wholly in front of the camera: then
+  // the tiles of the pixels whose centre (i + 0.5) lies within a pixel
+  // of its projection.
+  int tx0 = 0, tx1 = tiles_x - 1, ty0 = 0, ty1 = tiles_y - 1;
+  if (in_front && std::isfinite(u_lo + u_hi + v_lo + v_hi)) {
+    const auto first = [](double x) { return int(std::clamp(std::ceil(x - 1.5), -1.0, 1e9)); };
+    const auto last = [](double x) { return int(std::clamp(std::floor(x + 0.5), -1.0, 1e9)); };
+    const int i0 = first(u_lo), i1 = last(u_hi), j0 = first(v_lo), j1 = last(v_hi);
+    if (i1 < 0 || j1 < 0) return;
+    tx0 = std::max(0, i0) / tile;
+    tx1 = std::min(tiles_x - 1, i1 / tile);
+    ty0 = std::max(0, j0) / tile;
+    ty1 = std::min(tiles_y - 1, j1 / tile);
+  }
+  for (int ty = ty0; ty <= ty1; ++ty)
+    for (int tx = tx0; tx <= tx1; ++tx) {
+      double& s = start[size_t(ty) * size_t(tiles_x) + size_t(tx)];
+      s = std::min(s, dist);
+    }
+}
+
+}  // namespace
+
 std::vector<double> tile_start_distances(const SceneModel& model, const FastSkipGrid& skip, const Camera& cam, int tile,
                                          int tiles_x, int tiles_y, int threads) {
   const double inf = std::numeric_limits<double>::infinity();
   const size_t cells = size_t(tiles_x) * size_t(tiles_y);
   std::vector<double> start(cells, inf);
-  const Vec3d o = cam.origin();
-  const Vec3d lo = model.scene_box.lo.cast<double>();
-  const Vec3d micro = model.micro_voxel_size().cast<double>();
   const int R = skip.res;
   // Each thread takes slabs of fine voxels into its own distances, merged
   // by their minimum (in any order: the same result).
@@ -336,56 +395,8 @@ std::vector<double> tile_start_distances(const SceneModel& model, const FastSkip
 #pragma omp for schedule(dynamic, 1) nowait
     for (int fz = 0; fz < R; ++fz)
       for (int fy = 0; fy < R; ++fy)
-        for (int fx = 0; fx < R; ++fx) {
-          if (skip.at(fx, fy, fz) != 0) continue;  // empty fine voxel
-          // The fine voxel widened by one micro voxel, relative to the camera.
-          const Vec3d b_lo =
-              lo + micro * (Vec3d{double(fx), double(fy), double(fz)} * double(kMicroPerFine) - Vec3d{1, 1, 1}) - o;
-          const Vec3d b_hi = b_lo + micro * double(kMicroPerFine + 2);
-          double d2 = 0;  // squared distance from the camera to the box
-          for (int a = 0; a < 3; ++a) {
-            const double c = std::max({b_lo[a], -b_hi[a], 0.0});
-            d2 += c * c;
-          }
-          const double dist = std::sqrt(d2);
-          // The corners in camera space, projected (u = cx + fx X / -Z, v = cy - fy Y / -Z).
-          double u_lo = inf, u_hi = -inf, v_lo = inf, v_hi = -inf;
-          bool in_front = true;
-          for (int c = 0; c < 8 && in_front; ++c) {
-            const Vec3d w{(c & 1) ? b_hi.x : b_lo.x, (c & 2) ? b_hi.y : b_lo.y, (c & 4) ? b_hi.z : b_lo.z};
-            double p[3];
-            for (int j = 0; j < 3; ++j) p[j] = cam.c2w[j] * w.x + cam.c2w[4 + j] * w.y + cam.c2w[8 + j] * w.z;
-            const double depth = -p[2];
-            if (!(depth > 1e-9 * (std::abs(w.x) + std::abs(w.y) + std::abs(w.z) + 1e-300))) {
-              in_front = false;
-              break;
-            }
-            const double u = cam.cx + cam.fx * p[0] / depth, v = cam.cy - cam.fy * p[1] / depth;
-            u_lo = std::min(u_lo, u);
-            u_hi = std::max(u_hi, u);
-            v_lo = std::min(v_lo, v);
-            v_hi = std::max(v_hi, v);
-          }
-          // Every tile, unless the box lies wholly in front of the camera: then
-          // the tiles of the pixels whose centre (i + 0.5) lies within a pixel
-          // of its projection.
-          int tx0 = 0, tx1 = tiles_x - 1, ty0 = 0, ty1 = tiles_y - 1;
-          if (in_front && std::isfinite(u_lo + u_hi + v_lo + v_hi)) {
-            const auto first = [](double x) { return int(std::clamp(std::ceil(x - 1.5), -1.0, 1e9)); };
-            const auto last = [](double x) { return int(std::clamp(std::floor(x + 0.5), -1.0, 1e9)); };
-            const int i0 = first(u_lo), i1 = last(u_hi), j0 = first(v_lo), j1 = last(v_hi);
-            if (i1 < 0 || j1 < 0) continue;
-            tx0 = std::max(0, i0) / tile;
-            tx1 = std::min(tiles_x - 1, i1 / tile);
-            ty0 = std::max(0, j0) / tile;
-            ty1 = std::min(tiles_y - 1, j1 / tile);
-          }
-          for (int ty = ty0; ty <= ty1; ++ty)
-            for (int tx = tx0; tx <= tx1; ++tx) {
-              double& s = mine[size_t(ty) * size_t(tiles_x) + size_t(tx)];
-              s = std::min(s, dist);
-            }
-        }
+        for (int fx = 0; fx < R; ++fx)
+          if (skip.at(fx, fy, fz) == 0) lower_starts(model, cam, tile, tiles_x, tiles_y, fx, fy, fz, mine);
 #pragma omp critical
     for (size_t i = 0; i < cells; ++i) start[i] = std::min(start[i], mine[i]);
   }
