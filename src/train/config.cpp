@@ -132,6 +132,7 @@ void TrainConfig::validate() const {
         fit_box_steps, aabb_start);
   if (!(fit_box_margin >= 0.f)) fail("train config: fit_box_margin must not be negative");
   if (fit_box_max_blocks < 0) fail("train config: fit_box_max_blocks must not be negative (0: no limit)");
+  if (!(depth_jitter >= 0.f && depth_jitter <= 1.f)) fail("train config: depth_jitter must be in [0, 1]");
   if (!(error_map_share >= 0.f && error_map_share < 1.f)) fail("train config: error_map_share must be in [0, 1)");
   if (error_map_cell < 1 || error_map_cell > 4096) fail("train config: error_map_cell must be in [1, 4096] pixels");
   if (plan_step < 10) fail("train config: plan_step must be at least 10");
@@ -262,6 +263,7 @@ const std::map<std::string, Field>& fields() {
         }}},
       {"random_background", scalar(&TrainConfig::random_background)},
       {"pixel_jitter", scalar(&TrainConfig::pixel_jitter)},
+      {"depth_jitter", scalar(&TrainConfig::depth_jitter)},
       {"error_map_share", scalar(&TrainConfig::error_map_share)},
       {"error_map_cell", scalar(&TrainConfig::error_map_cell)},
       {"error_map_unbiased", scalar(&TrainConfig::error_map_unbiased)},

@@ -27,6 +27,11 @@ struct TrainConfig {
   float background[3] = {1.f, 1.f, 1.f};  // the background the model is exported for (and evaluated on)
   bool random_background = true;          // with RGBA images: composite each ray's target on a random colour
   bool pixel_jitter = false;              // training rays through a random point of their pixel, not its centre
+  // > 0: each training ray's samples move along it by a random share of the
+  // sample step, uniform in +-depth_jitter / 2 of it (1: anywhere between two
+  // fixed positions), so the field is fitted between the positions a render
+  // samples, not only at them; 0: the render's fixed positions
+  float depth_jitter = 0.f;
   // > 0: this share of each step's rays go through pixels drawn in proportion
   // to an error map (every training image in cells of error_map_cell^2
   // pixels, each cell the running mean squared error of the rays through it),

@@ -177,12 +177,17 @@ void Trainer::State::sample_training_rays(Batch& b, int n) {
     }
     const Frame& fr = data.frames[f];
     const uint64_t h = mix64(hash_combine(base, uint64_t(i)));
-    if (cfg.pixel_jitter)  // a point of the pixel's square, drawn apart from the background's colour
-      set_ray(b, i,
-              fr.camera.ray_at(double(x) + double(uniform01(hash_combine(h, 3))),
-                               double(y) + double(uniform01(hash_combine(h, 4)))));
-    else
-      set_ray(b, i, fr.camera.pixel_ray(x, y));
+    Ray ray = cfg.pixel_jitter  // a point of the pixel's square, drawn apart from the background's colour
+                  ? fr.camera.ray_at(double(x) + double(uniform01(hash_combine(h, 3))),
+                                     double(y) + double(uniform01(hash_combine(h, 4))))
+                  : fr.camera.pixel_ray(x, y);
+    if (cfg.depth_jitter > 0.f) {
+      // The samples sit at (k + 1/2) delta from the origin: moving the origin
+      // along the ray moves them all by the same distance.
+      const double u = double(uniform01(hash_combine(h, 8))) - 0.5;
+      ray.origin = ray.origin + ray.dir * (u * double(cfg.depth_jitter) * double(delta));
+    }
+    set_ray(b, i, ray);
     const float* t = fr.image.at(x, y);
     float* bg = &b.background[3 * size_t(i)];
     if (rgba) {

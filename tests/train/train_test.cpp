@@ -196,6 +196,7 @@ TEST(Train, RegularisersActAndKeepTheResultIndependentOfThreads) {
   reg.mlp_tie_weight = 1e-3f;
   reg.mlp_equalize = 0.f;  // the tie and the equalization exclude each other
   reg.pixel_jitter = true;
+  reg.depth_jitter = 1.f;
   TrainOptions one, two;
   one.threads = 1;
   two.threads = 2;
@@ -206,14 +207,15 @@ TEST(Train, RegularisersActAndKeepTheResultIndependentOfThreads) {
   EXPECT_EQ(model_bytes(a, true), model_bytes(b, true));
   EXPECT_NE(model_bytes(a, true), model_bytes(plain, true));
   // The terms that act after the freeze only (the others have gradient tests
-  // in kernels_test.cpp) and the rays' jitter in their pixels each change
-  // the result alone.
-  for (int term = 0; term < 4; ++term) {
+  // in kernels_test.cpp), the rays' jitter in their pixels and their
+  // samples' jitter along them each change the result alone.
+  for (int term = 0; term < 5; ++term) {
     TrainConfig c = short_config();
     if (term == 0) c.block_tv_weight = 1e-5f;
     if (term == 1) c.mlp_tie_weight = 1e-3f, c.mlp_equalize = 0.f;
     if (term == 2) c.block_smooth_weight = 0.5f;
     if (term == 3) c.pixel_jitter = true;
+    if (term == 4) c.depth_jitter = 1.f;
     Trainer t(data, c);
     ASSERT_TRUE(t.run(two));
     EXPECT_NE(model_bytes(t, false), model_bytes(plain, false)) << "term " << term;
@@ -510,9 +512,9 @@ TEST(Train, DefaultPresetIsTheBuiltInDefaultsAndTheEarlierPresetsWithTheirOverla
   const TrainConfig base2 = load_train_config(train_dir / "base-v2.yaml");
   EXPECT_EQ(to_yaml(load_train_config(ablation / "per-cv-0.3-distortion-0.01.yaml", base1)), to_yaml(base2));
   TrainConfig overlays = base2;
-  for (const char* o :
-       {"lr-2x-per-cv-0.45.yaml", "mlp-equalize-0.5.yaml", "prune-cv-0.2.yaml", "calibrate-activations.yaml",
-        "prune-parts-0.01.yaml", "qat-lr-0.33.yaml", "lr-final-0.2.yaml", "fit-box-max-21000.yaml", "qat-activations.yaml"})
+  for (const char* o : {"lr-2x-per-cv-0.45.yaml", "mlp-equalize-0.5.yaml", "prune-cv-0.2.yaml",
+                        "calibrate-activations.yaml", "prune-parts-0.01.yaml", "qat-lr-0.33.yaml", "lr-final-0.2.yaml",
+                        "fit-box-max-21000.yaml", "qat-activations.yaml"})
     overlays = load_train_config(ablation / o, overlays);
   EXPECT_EQ(to_yaml(overlays), to_yaml(preset));
 }
