@@ -30,8 +30,9 @@ struct TrainConfig {
   // > 0: each training ray's samples move along it by a random share of the
   // sample step, uniform in +-depth_jitter / 2 of it (1: anywhere between two
   // fixed positions), so the field is fitted between the positions a render
-  // samples, not only at them; 0: the render's fixed positions
-  float depth_jitter = 0.f;
+  // samples, not only at them (docs/training.md, "Samples jittered along
+  // their rays"); 0: the render's fixed positions
+  float depth_jitter = 1.f;
   // > 0: this share of each step's rays go through pixels drawn in proportion
   // to an error map (every training image in cells of error_map_cell^2
   // pixels, each cell the running mean squared error of the rays through it),
@@ -114,7 +115,7 @@ struct TrainConfig {
   // kPilotShare (4) times its steps skips it (train/fit_box.h). 0: scene_box
   // as given.
   int64_t fit_box_steps = 1500;
-  float fit_box_margin = 0.05f;  // scene units
+  float fit_box_margin = 0.02f;  // scene units
   // 0: no limit; else the box is no smaller than one in which the pilot's
   // feature blocks, scaled to the box (train/fit_box.h), number at most this
   // many. A short pilot keeps more blocks than the finished model (lego: 1500

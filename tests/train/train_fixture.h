@@ -65,6 +65,9 @@ inline TrainConfig small_config() {
   // Float activations in the quantization-aware phase: the tests of
   // qat_activations turn it on themselves.
   c.qat_activations = false;
+  // Samples at fixed depths along each ray: the test of depth_jitter turns
+  // it on itself.
+  c.depth_jitter = 0.f;
   return c;
 }
 
