@@ -178,6 +178,9 @@ void TrainConfig::validate() const {
         block_smooth_weight, 1.f / (9.f * block_rate));
   if (!(distortion_weight >= 0.f)) fail("train config: distortion_weight must not be negative");
   if (!(mlp_tie_weight >= 0.f)) fail("train config: mlp_tie_weight must not be negative");
+  for (float d : {ema_decay_per_cv, ema_decay_qat})
+    if (!(d >= 0.f && d < 1.f)) fail("train config: ema_decay_per_cv and ema_decay_qat must be in [0, 1)");
+  if (ema_every < 1 || ema_every > 1000) fail("train config: ema_every must be between 1 and 1000");
   if (!(init_features >= 0.f)) fail("train config: init_features must not be negative");
   if (occupancy_every < 1) fail("train config: occupancy_every must be at least 1");
   if (!(occupancy_decay > 0.f && occupancy_decay <= 1.f)) fail("train config: occupancy_decay must be in (0, 1]");
@@ -299,6 +302,9 @@ const std::map<std::string, Field>& fields() {
       {"block_smooth_weight", scalar(&TrainConfig::block_smooth_weight)},
       {"distortion_weight", scalar(&TrainConfig::distortion_weight)},
       {"mlp_tie_weight", scalar(&TrainConfig::mlp_tie_weight)},
+      {"ema_decay_per_cv", scalar(&TrainConfig::ema_decay_per_cv)},
+      {"ema_decay_qat", scalar(&TrainConfig::ema_decay_qat)},
+      {"ema_every", scalar(&TrainConfig::ema_every)},
       {"init_features", scalar(&TrainConfig::init_features)},
       {"occupancy_every", scalar(&TrainConfig::occupancy_every)},
       {"occupancy_decay", scalar(&TrainConfig::occupancy_decay)},

@@ -96,6 +96,15 @@ struct TrainConfig {
   float distortion_weight = 0.01f;  // distortion loss per ray (train/volume.h), distances in scene-box edges
   float mlp_tie_weight = 0.f;       // per-CV phases: squared distance of each MLP's weights to the MLPs' mean
   float init_features = 1e-4f;      // initial feature values: uniform in +-this
+  // Running averages of the weights (the feature blocks and the MLPs), 0: off.
+  // In the per-CV phase with ema_decay_per_cv per step: the quantization-aware
+  // phase then starts from the average. In the quantization-aware phase with
+  // ema_decay_qat: the exported model is the average. Each average starts
+  // from its phase's first step and is updated every ema_every steps (with
+  // the decay to that power).
+  float ema_decay_per_cv = 0.f;
+  float ema_decay_qat = 0.f;
+  int ema_every = 4;
 
   // --- occupancy ---
   int occupancy_every = 16;       // steps between partial refreshes (one of 8 parts each)

@@ -173,6 +173,7 @@ void Trainer::State::do_step() {
 #pragma omp parallel for schedule(static)
   for (int64_t k = 0; k < np; ++k)
     mstep.update(mlp_params[size_t(k)], mlp_m[size_t(k)], mlp_v[size_t(k)], grad[size_t(k)]);
+  update_ema();
   lap(kAdam);
 
   // Running error and the next batch size.
@@ -186,9 +187,37 @@ void Trainer::State::do_step() {
   if (step >= iters) {
     psnr_quantized = mse_ema > 0 ? -10.0 * std::log10(mse_ema) : 0;
     if (phase != Phase::Quantize) psnr_float = psnr_quantized;
+    take_ema();
     phase = Phase::Done;
     update_fake_quantized_mlps();  // render() then reads the weights export_model(true) writes
   }
+}
+
+void Trainer::State::update_ema() {
+  const float d = ema_decay();
+  if (!(d > 0.f)) return;
+  std::vector<float>& values = blocks.values();
+  if (ema_blocks.empty()) {
+    ema_blocks = values;
+    ema_mlps = mlp_params;
+    return;
+  }
+  if (step % cfg.ema_every != 0) return;
+  float dk = 1.f;  // d^ema_every by repeated products (the same bits everywhere, unlike pow)
+  for (int i = 0; i < cfg.ema_every; ++i) dk *= d;
+  const float w = 1.f - dk;
+  const int64_t n = int64_t(values.size());
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < n; ++i) ema_blocks[size_t(i)] += w * (values[size_t(i)] - ema_blocks[size_t(i)]);
+  for (size_t i = 0; i < mlp_params.size(); ++i) ema_mlps[i] += w * (mlp_params[i] - ema_mlps[i]);
+}
+
+void Trainer::State::take_ema() {
+  if (ema_blocks.empty()) return;
+  blocks.values() = std::move(ema_blocks);
+  mlp_params = std::move(ema_mlps);
+  ema_blocks.clear();
+  ema_mlps.clear();
 }
 
 // Pulls every per-CV MLP toward the mean of all of them (mlp_tie_weight):

@@ -182,6 +182,10 @@ std::vector<uint8_t> Trainer::State::save() const {
     w.put("max_weight", max_weight);
     w.put("float_blocks", float_blocks);
     w.put("float_mlps", float_mlps);
+    if (!ema_blocks.empty()) {
+      w.put("ema_blocks", ema_blocks);
+      w.put("ema_mlps", ema_mlps);
+    }
     if (!err_map.empty()) w.put("error_map", err_map.values());
   };
   CheckpointWriter sizes(true);
@@ -324,6 +328,13 @@ void Trainer::State::load(const CheckpointReader& r) {
   if (!float_blocks.empty() || !float_mlps.empty()) {
     expect_size("float_blocks", float_blocks.size(), phase == Phase::Main ? 0 : blocks.values().size());
     expect_size("float_mlps", float_mlps.size(), mlp_params.size());
+  }
+  ema_blocks = r.has("ema_blocks") ? floats("ema_blocks") : std::vector<float>{};
+  ema_mlps = r.has("ema_mlps") ? floats("ema_mlps") : std::vector<float>{};
+  if (!ema_blocks.empty() || !ema_mlps.empty()) {
+    if (!(ema_decay() > 0.f)) fail("{}: the checkpoint holds running averages its phase does not keep", r.source());
+    expect_size("ema_blocks", ema_blocks.size(), blocks.values().size());
+    expect_size("ema_mlps", ema_mlps.size(), mlp_params.size());
   }
   if (!err_map.empty()) {  // sized by init_error_map for this config and dataset
     std::vector<float> e = r.get<float>("error_map");

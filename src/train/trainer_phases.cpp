@@ -274,6 +274,7 @@ void Trainer::State::prune() {
 
 void Trainer::State::start_quantization() {
   if (mse_ema > 0) psnr_float = -10.0 * std::log10(mse_ema);
+  take_ema();  // the per-CV phase's averages (ema_decay_per_cv)
   if (!max_weight.empty()) prune();
   equalize_mlps();
   float_blocks = blocks.values();

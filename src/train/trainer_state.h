@@ -149,6 +149,10 @@ struct Trainer::State {
 
   // Float snapshot when quantization-aware training begins.
   std::vector<float> float_blocks, float_mlps;
+  // The running averages of the block values and MLP parameters in the
+  // current phase (cfg.ema_decay_per_cv, ema_decay_qat); empty when off or
+  // before the phase's first step.
+  std::vector<float> ema_blocks, ema_mlps;
 
   mutable trainer_detail::Batch batch;
   mutable double stage_s[trainer_detail::kStages] = {};
@@ -157,6 +161,16 @@ struct Trainer::State {
 
   State(const Dataset& d, const TrainConfig& c);
   void fresh_init();
+
+  // The averages' decay per step in the current phase (0: none).
+  float ema_decay() const {
+    return phase == Phase::PerCv ? cfg.ema_decay_per_cv : phase == Phase::Quantize ? cfg.ema_decay_qat : 0.f;
+  }
+  // After a step's updates: starts or updates the current phase's averages.
+  void update_ema();
+  // Replaces the block values and MLP parameters by their averages (if any)
+  // and drops the averages.
+  void take_ema();
 
   int64_t freeze_step() const { return cfg.freeze_step(iters); }
   int64_t qat_step() const {

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 
 #include "core/error.h"
 #include "core/metrics.h"
@@ -18,6 +19,7 @@
 #include "render/reference.h"
 #include "temp_dir.h"
 #include "train/calibrate.h"
+#include "train/checkpoint_io.h"
 #include "train/config.h"
 #include "train/images.h"
 #include "train/synthetic.h"
@@ -367,6 +369,93 @@ TEST(Train, QatLearningRateScaleActsInTheQuantizationPhaseOnly) {
   EXPECT_EQ(fa.features_f32, fb.features_f32);
   EXPECT_EQ(fa.mlps_f32, fb.mlps_f32);
   EXPECT_NE(model_bytes(a, true), model_bytes(b, true));
+}
+
+// The raw block values and MLP parameters of a trainer, from its checkpoint.
+struct RawWeights {
+  std::vector<float> blocks, mlps;
+};
+RawWeights raw_weights(const Trainer& t) {
+  const std::vector<uint8_t> bytes = t.checkpoint();  // (the reader keeps views into it)
+  const CheckpointReader r(bytes, "checkpoint");
+  return {r.has("block_value") ? r.get<float>("block_value") : std::vector<float>{}, r.get<float>("mlp_params")};
+}
+
+TEST(Train, EmaOfTheQuantizationPhaseIsTheAverageOfItsSteps) {
+  // With ema_decay_qat the quantization-aware phase's steps are those of a
+  // run without it (the average is passive), and the run ends with its
+  // weights replaced by their running average, started at the phase's first
+  // step and updated every ema_every steps with the decay to that power:
+  // computed here from the plain run's weights after every step.
+  const Dataset data = load("train");
+  TrainConfig c = short_config();
+  c.ema_decay_qat = 0.8f;
+  c.ema_every = 2;
+  const float w = 1.f - 0.8f * 0.8f;
+  Trainer plain(data, short_config()), avg(data, c);
+  RawWeights expect;
+  int qat_steps = 0;
+  while (!plain.done()) {
+    const int64_t s = plain.stats().step;
+    plain.step();
+    avg.step();
+    if (plain.stats().phase != Phase::Quantize && plain.stats().phase != Phase::Done) {
+      EXPECT_EQ(avg.stats().loss, plain.stats().loss) << "step " << s;
+      continue;
+    }
+    const RawWeights now = raw_weights(plain);
+    if (!plain.done()) {  // (after the last step the averages replace the weights)
+      const RawWeights a = raw_weights(avg);
+      EXPECT_EQ(a.mlps, now.mlps) << "step " << s;
+      EXPECT_EQ(a.blocks, now.blocks) << "step " << s;
+    }
+    if (qat_steps++ == 0) {
+      expect = now;
+    } else if (s % 2 == 0) {
+      for (size_t i = 0; i < now.blocks.size(); ++i) expect.blocks[i] += w * (now.blocks[i] - expect.blocks[i]);
+      for (size_t i = 0; i < now.mlps.size(); ++i) expect.mlps[i] += w * (now.mlps[i] - expect.mlps[i]);
+    }
+  }
+  ASSERT_TRUE(avg.done());
+  EXPECT_EQ(qat_steps, 20);  // steps 80 to 99
+  const RawWeights got = raw_weights(avg);
+  EXPECT_EQ(got.blocks, expect.blocks);
+  EXPECT_EQ(got.mlps, expect.mlps);
+  // The float model (the snapshot at the phase's start) is the plain run's.
+  EXPECT_EQ(avg.export_model(false).features_f32, plain.export_model(false).features_f32);
+  EXPECT_NE(model_bytes(avg, true), model_bytes(plain, true));
+}
+
+TEST(Train, EmaRunsResumeToTheSameBits) {
+  // Both averages on; interrupted in the per-CV phase (step 70) and in the
+  // quantization-aware phase (step 90), each time continued from the
+  // checkpoint bytes. The per-CV average is where the quantization-aware
+  // phase starts, so the float model differs from a run without it.
+  const Dataset data = load("train");
+  TrainConfig c = short_config();
+  c.ema_decay_per_cv = 0.9f;
+  c.ema_decay_qat = 0.9f;
+  c.ema_every = 3;
+  Trainer whole(data, c);
+  ASSERT_TRUE(whole.run({}));
+  std::vector<uint8_t> ckpt;
+  for (int64_t stop : {70, 90}) {
+    std::unique_ptr<Trainer> t =
+        ckpt.empty() ? std::make_unique<Trainer>(data, c) : std::make_unique<Trainer>(data, ckpt, "checkpoint");
+    TrainOptions o;
+    o.stop_after = stop;
+    ASSERT_FALSE(t->run(o));
+    EXPECT_TRUE(CheckpointReader(t->checkpoint(), "checkpoint").has("ema_blocks"));
+    ckpt = t->checkpoint();
+  }
+  Trainer last(data, ckpt, "checkpoint");
+  ASSERT_TRUE(last.run({}));
+  EXPECT_FALSE(CheckpointReader(last.checkpoint(), "checkpoint").has("ema_blocks"));
+  EXPECT_EQ(model_bytes(last, true), model_bytes(whole, true));
+  EXPECT_EQ(model_bytes(last, false), model_bytes(whole, false));
+  Trainer plain(data, short_config());
+  ASSERT_TRUE(plain.run({}));
+  EXPECT_NE(model_bytes(whole, false), model_bytes(plain, false));
 }
 
 TEST(Train, BlockLearningRateScaleActsOnTheBlocksOnly) {
