@@ -114,6 +114,8 @@ RenderSettings settings_from(const py::kwargs& kw, const ChipConfig& defaults) {
       s.transmittance_min = kv.second.cast<float>();
     else if (k == "fast_transmittance_min")
       s.fast_transmittance_min = kv.second.cast<float>();
+    else if (k == "fast_int8_transmittance_min")
+      s.fast_int8_transmittance_min = kv.second.cast<float>();
     else if (k == "background") {
       const auto b = kv.second.cast<std::vector<float>>();
       if (b.size() != 3) fail("background: expected 3 values (R, G, B), got {}", b.size());
@@ -125,7 +127,7 @@ RenderSettings settings_from(const py::kwargs& kw, const ChipConfig& defaults) {
     else
       fail(
           "render: unknown option '{}' (known: step_micro, transmittance_min, fast_transmittance_min, "
-          "background, form, threads)",
+          "fast_int8_transmittance_min, background, form, threads)",
           k);
   }
   return s;

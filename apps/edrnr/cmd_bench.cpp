@@ -35,7 +35,7 @@ struct BenchOptions {
   std::string model, dataset, split = "test", views = "0,8,16", engine = "fast", vs;
   int frames = 5, warmup = 1, width = 800, threads = 0;
   float step = kDefaultStepMicro;
-  float fast_transmittance = RenderSettings().fast_transmittance_min;
+  float fast_transmittance = -1.f;  // not given: each path's default
   std::string form = "auto";
   CLI::Option* dataset_opt = nullptr;
   CLI::Option* views_opt = nullptr;
@@ -114,7 +114,7 @@ void run_bench_render(const BenchOptions& o) {
   const Engine& engine = find_engine(o.engine);
   RenderSettings s;
   s.step_micro = o.step;
-  s.fast_transmittance_min = o.fast_transmittance;
+  apply_fast_transmittance(o.fast_transmittance, s);
   s.form = parse_model_form(o.form, "--form");
   s.threads = o.threads;
   check_step_micro(o.step, 0, "--step");

@@ -33,7 +33,7 @@ struct EvalOptions {
   std::string views, json_path, save_dir;
   int limit = 0, downscale = 1;
   float step = kDefaultStepMicro;
-  float fast_transmittance = RenderSettings().fast_transmittance_min;
+  float fast_transmittance = -1.f;  // not given: each path's default
   std::string form = "auto", background = "white", engine = "reference";
   int threads = 0;
   CLI::Option *views_opt, *limit_opt;
@@ -84,7 +84,7 @@ void run_eval(const EvalOptions& o) {
   const bool vs_reference = std::string(engine.name) != "reference";
   RenderSettings s;
   s.step_micro = o.step;
-  s.fast_transmittance_min = o.fast_transmittance;
+  apply_fast_transmittance(o.fast_transmittance, s);
   s.form = parse_model_form(o.form, "--form");
   parse_background(o.background, "--background", s.background);
   s.threads = o.threads;
@@ -164,7 +164,8 @@ void run_eval(const EvalOptions& o) {
     j["split"] = o.split;
     j["downscale"] = o.downscale;
     j["step_micro"] = o.step;
-    j["fast_transmittance_min"] = o.fast_transmittance;
+    j["fast_transmittance_min"] = s.fast_transmittance_min;
+    j["fast_int8_transmittance_min"] = s.fast_int8_transmittance_min;
     j["form"] = o.form;
     j["engine"] = engine.name;
     j["background"] = {s.background[0], s.background[1], s.background[2]};

@@ -33,7 +33,7 @@ struct RenderOptions {
   double orbit = 0, elevation = 30, radius = 4, fov = 40;
   int width = 0, height = 0;
   float step = kDefaultStepMicro;
-  float fast_transmittance = RenderSettings().fast_transmittance_min;
+  float fast_transmittance = -1.f;  // not given: each path's default
   std::string form = "auto", background = "white", engine = "reference";
   int threads = 0;
   int turntable = 0;
@@ -155,7 +155,7 @@ void run_render(const RenderOptions& o) {
   const Engine& engine = find_engine(o.engine);
   RenderSettings s;
   s.step_micro = o.step;
-  s.fast_transmittance_min = o.fast_transmittance;
+  apply_fast_transmittance(o.fast_transmittance, s);
   s.form = parse_model_form(o.form, "--form");
   parse_background(o.background, "--background", s.background);
   limits::check_threads(o.threads);

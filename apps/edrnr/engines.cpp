@@ -1,5 +1,7 @@
 #include "engines.h"
 
+#include <fmt/format.h>
+
 #include <string>
 
 #include "chip/chip.h"
@@ -29,11 +31,20 @@ const Engine& find_engine(const std::string& name) {
 }
 
 void add_fast_transmittance_option(CLI::App* cmd, float* value) {
-  cmd->add_option("--fast-transmittance", *value,
-                  "fast engines: end rays below this transmittance (each pixel within it of the reference's; 0: the "
-                  "reference's samples exactly)")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
+  const RenderSettings d;
+  cmd->add_option(
+         "--fast-transmittance", *value,
+         fmt::format("fast engines: end rays below this transmittance (each pixel within it of the image with "
+                     "the reference's samples; 0: those samples exactly); default {:g} on the float path, {:g} "
+                     "on the INT8 path",
+                     d.fast_transmittance_min, d.fast_int8_transmittance_min))
+      ->check(CLI::Range(0.0, 1.0));
+}
+
+void apply_fast_transmittance(float value, RenderSettings& s) {
+  if (value < 0.f) return;
+  s.fast_transmittance_min = value;
+  s.fast_int8_transmittance_min = value;
 }
 
 }  // namespace edrnr::cli

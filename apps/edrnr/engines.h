@@ -20,9 +20,12 @@ struct Engine {
 // The engine called `name`; an Error listing the available ones otherwise.
 const Engine& find_engine(const std::string& name);
 
-// Adds --fast-transmittance (RenderSettings::fast_transmittance_min, in
-// [0, 1]) to a command that renders with the engines; *value holds its
-// default.
+// Adds --fast-transmittance (in [0, 1]) to a command that renders with the
+// engines; *value starts below 0 (not given).
 void add_fast_transmittance_option(CLI::App* cmd, float* value);
+// The option's value, when given, as both paths' threshold
+// (RenderSettings::fast_transmittance_min and fast_int8_transmittance_min);
+// else their defaults stay.
+void apply_fast_transmittance(float value, RenderSettings& s);
 
 }  // namespace edrnr::cli

@@ -146,7 +146,9 @@ class TileRenderer {
     start_ = tile_start_distances(m_, skip_, camera_, kStartCell, cells_x_,
                                   (camera.height + kStartCell - 1) / kStartCell, threads);
     delta_ = sample_spacing(m_, s.step_micro);
-    transmittance_min_ = std::max(s.transmittance_min, s.fast_transmittance_min);
+    transmittance_min_ =
+        std::max(s.transmittance_min,
+                 fm.arithmetic == FastArithmetic::Int8 ? s.fast_int8_transmittance_min : s.fast_transmittance_min);
     aabb_ = {m_.object_aabb.lo.cast<double>(), m_.object_aabb.hi.cast<double>()};
   }
 
@@ -398,7 +400,7 @@ class TileRenderer {
   bool profile_;
   const FastActivationTables& tables_;  // the INT8 path's activations for delta_
   float delta_ = 0;
-  float transmittance_min_ = 0;  // the rays' end (RenderSettings::fast_transmittance_min)
+  float transmittance_min_ = 0;  // the rays' end (RenderSettings::fast_transmittance_min, _int8_)
   int cells_x_ = 0;
   std::vector<double> start_;  // per cell of kStartCell pixels, row by row: where its rays may start
   Box3d aabb_;

@@ -82,6 +82,8 @@ void check_render_inputs(const Camera& camera, const RenderSettings& s) {
     fail("transmittance threshold {} is outside [0, 1]", s.transmittance_min);
   if (!(s.fast_transmittance_min >= 0.f && s.fast_transmittance_min <= 1.f))
     fail("fast renderer's transmittance threshold {} is outside [0, 1]", s.fast_transmittance_min);
+  if (!(s.fast_int8_transmittance_min >= 0.f && s.fast_int8_transmittance_min <= 1.f))
+    fail("fast renderer's INT8 transmittance threshold {} is outside [0, 1]", s.fast_int8_transmittance_min);
   if (s.threads < 0) fail("thread count {} is negative", s.threads);
 }
 

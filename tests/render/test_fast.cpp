@@ -457,6 +457,39 @@ TEST(Fast, EarlierEndStaysWithinItsBound) {
   EXPECT_THROW(fast.render(cam, high), Error);
 }
 
+// The INT8 path ends its rays at a transmittance of 1e-2: every pixel within
+// 1e-2 of its own image with the reference's samples (threshold 0).
+TEST(Fast, Int8PathsEarlierEndStaysWithinItsBound) {
+  const SceneModel m = several_model(128, false);
+  const FastRenderer fast(m, ModelForm::Auto, FastPath::Int8);
+  ASSERT_EQ(fast.arithmetic(), FastArithmetic::Int8);
+  RenderSettings s;
+  ASSERT_EQ(s.fast_int8_transmittance_min, 1e-2f);
+  RenderSettings all = s;
+  all.fast_int8_transmittance_min = 0.f;
+  for (const Camera& cam : views(61, 47)) {
+    RenderStats as, fs;
+    const Image ref = fast.render(cam, all, &as);
+    const Image img = fast.render(cam, s, &fs);
+    float worst = 0.f;
+    for (size_t i = 0; i < img.data.size(); ++i) worst = std::max(worst, std::fabs(img.data[i] - ref.data[i]));
+    EXPECT_LE(worst, 1e-2f + 1e-5f);
+    EXPECT_GT(worst, 1e-4f);  // the end moved
+    EXPECT_LT(fs.samples, as.samples);
+  }
+  // The float path's threshold does not act on it, nor the INT8 one on the float path.
+  RenderSettings other = s;
+  other.fast_transmittance_min = 0.f;
+  const Camera cam = views(61, 47)[0];
+  EXPECT_EQ(fast.render(cam, other).data, fast.render(cam, s).data);
+  const FastRenderer flt(m, ModelForm::Auto, FastPath::Float);
+  other = s;
+  other.fast_int8_transmittance_min = 0.f;
+  EXPECT_EQ(flt.render(cam, other).data, flt.render(cam, s).data);
+  other.fast_int8_transmittance_min = -1.f;
+  EXPECT_THROW(fast.render(cam, other), Error);
+}
+
 TEST(Fast, ImageDoesNotDependOnTheThreadCount) {
   const SceneModel m = several_model(64, false);
   for (FastPath path : {FastPath::Int8, FastPath::Float}) {
