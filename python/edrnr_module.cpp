@@ -106,6 +106,9 @@ RenderSettings settings_from(const py::kwargs& kw, const ChipConfig& defaults) {
   s.step_micro = defaults.step_micro;
   s.transmittance_min = defaults.transmittance_min;
   for (int c = 0; c < 3; ++c) s.background[c] = defaults.background[c];
+  // fast_transmittance_min sets both fast paths' ray end (as the CLI's
+  // --fast-transmittance), fast_int8_transmittance_min then the INT8 path's.
+  std::optional<float> both, int8;
   for (const auto& kv : kw) {
     const std::string k = py::str(kv.first);
     if (k == "step_micro")
@@ -113,9 +116,9 @@ RenderSettings settings_from(const py::kwargs& kw, const ChipConfig& defaults) {
     else if (k == "transmittance_min")
       s.transmittance_min = kv.second.cast<float>();
     else if (k == "fast_transmittance_min")
-      s.fast_transmittance_min = kv.second.cast<float>();
+      both = kv.second.cast<float>();
     else if (k == "fast_int8_transmittance_min")
-      s.fast_int8_transmittance_min = kv.second.cast<float>();
+      int8 = kv.second.cast<float>();
     else if (k == "background") {
       const auto b = kv.second.cast<std::vector<float>>();
       if (b.size() != 3) fail("background: expected 3 values (R, G, B), got {}", b.size());
@@ -130,6 +133,8 @@ RenderSettings settings_from(const py::kwargs& kw, const ChipConfig& defaults) {
           "fast_int8_transmittance_min, background, form, threads)",
           k);
   }
+  if (both) s.fast_transmittance_min = s.fast_int8_transmittance_min = *both;
+  if (int8) s.fast_int8_transmittance_min = *int8;
   return s;
 }
 

@@ -47,13 +47,24 @@ class ModuleTest(unittest.TestCase):
             self.assertGreater(psnr, 30, engine)
         with self.assertRaises(ValueError):
             edrnr.render(self.model, self.camera, engine="nope")
-        # The fast engines end rays at a transmittance of 1e-3 unless told
-        # otherwise: every pixel within 1e-3 of the reference's samples' image.
+        # The fast engines end rays at a transmittance of 1e-3 (float path)
+        # and 1e-2 (INT8 path) unless told otherwise: every pixel within that
+        # of the image with the reference's samples; fast_transmittance_min
+        # sets both, fast_int8_transmittance_min the INT8 path's.
         exact = edrnr.render(self.model, self.camera, engine="fast-float", fast_transmittance_min=0)
         early = edrnr.render(self.model, self.camera, engine="fast-float")
         self.assertLessEqual(float(np.max(np.abs(exact - early))), 1e-3 + 1e-6)
+        exact8 = edrnr.render(self.model, self.camera, engine="fast", fast_transmittance_min=0)
+        early8 = edrnr.render(self.model, self.camera, engine="fast")
+        self.assertLessEqual(float(np.max(np.abs(exact8 - early8))), 1e-2 + 1e-6)
+        self.assertTrue(np.array_equal(
+            exact8, edrnr.render(self.model, self.camera, engine="fast", fast_int8_transmittance_min=0)))
+        self.assertFalse(np.array_equal(
+            early8, edrnr.render(self.model, self.camera, engine="fast", fast_int8_transmittance_min=1e-3)))
         with self.assertRaises(ValueError):
             edrnr.render(self.model, self.camera, engine="fast", fast_transmittance_min=2)
+        with self.assertRaises(ValueError):
+            edrnr.render(self.model, self.camera, engine="fast", fast_int8_transmittance_min=-1)
 
     def test_preset_as_name_dict_and_file_agree(self):
         by_name = edrnr.simulate(self.model, self.camera, preset="edr_nr_40nm")
