@@ -4,37 +4,10 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "train/mlp_layer_kernels.h"
 #include "train/rng.h"
 
-#pragma GCC diagnostic ignored "-Wpsabi"
-
 namespace edrnr::train {
-namespace {
-
-// Eight lanes; GCC lowers it to SSE2 pairs or one AVX2 register.
-typedef float v8f __attribute__((vector_size(32)));
-constexpr int kVecs = kLanes / 8;
-
-#define EDRNR_CLONES __attribute__((target_clones("avx2", "default")))
-
-__attribute__((always_inline)) inline v8f splat(float x) { return v8f{x, x, x, x, x, x, x, x}; }
-__attribute__((always_inline)) inline v8f load8(const float* p) {
-  v8f v;
-  __builtin_memcpy(&v, p, sizeof v);
-  return v;
-}
-__attribute__((always_inline)) inline void store8(float* p, v8f v) { __builtin_memcpy(p, &v, sizeof v); }
-typedef float v4f __attribute__((vector_size(16)));
-// Fixed pairwise order, the same on every instruction set:
-// ((v0 + v4) + (v2 + v6)) + ((v1 + v5) + (v3 + v7)).
-__attribute__((always_inline)) inline float hsum8(v8f v) {
-  const v4f a = __builtin_shufflevector(v, v, 0, 1, 2, 3) + __builtin_shufflevector(v, v, 4, 5, 6, 7);
-  const v4f b = a + __builtin_shufflevector(a, a, 2, 3, 2, 3);
-  return b[0] + b[1];
-}
-
-}  // namespace
-
 MlpLayout::MlpLayout(const MlpArch& a) : arch(a) {
   const auto& dw = arch.density_widths;
   const auto& cw = arch.color_widths;
@@ -199,71 +172,8 @@ MlpQ quantize_mlp(const MlpLayout& layout, const float* params, const std::vecto
   return q;
 }
 
-namespace {
-
-// y[o][:] = b[o] + sum_i W[o][i] x[i][:], inputs summed in index order.
-EDRNR_CLONES void layer_forward(const float* W, const float* b, int in, int out, const float* x, float* y, bool relu) {
-  const v8f zero = splat(0.f);
-  for (int o = 0; o < out; ++o) {
-    const float* w = W + size_t(o) * in;
-    v8f a[kVecs];
-    for (int v = 0; v < kVecs; ++v) a[v] = splat(b[o]);
-    for (int i = 0; i < in; ++i) {
-      v8f wi = splat(w[i]);
-      const float* xi = x + size_t(i) * kLanes;
-      for (int v = 0; v < kVecs; ++v) a[v] += wi * load8(xi + 8 * v);
-    }
-    for (int v = 0; v < kVecs; ++v) {
-      if (relu) a[v] = a[v] > zero ? a[v] : zero;
-      store8(y + size_t(o) * kLanes + 8 * v, a[v]);
-    }
-  }
-}
-
-// Parameter gradients of one layer: gW[o][i] += sum_lanes dy[o] x[i],
-// gb[o] += sum_lanes dy[o] (lanes summed by hsum8's fixed tree).
-EDRNR_CLONES void layer_param_grad(const float* x, const float* dy, int in, int out, float* gW, float* gb) {
-  for (int o = 0; o < out; ++o) {
-    const float* d = dy + size_t(o) * kLanes;
-    v8f dv[kVecs];
-    for (int v = 0; v < kVecs; ++v) dv[v] = load8(d + 8 * v);
-    v8f s = dv[0];
-    for (int v = 1; v < kVecs; ++v) s += dv[v];
-    gb[o] += hsum8(s);
-    for (int i = 0; i < in; ++i) {
-      const float* xi = x + size_t(i) * kLanes;
-      v8f acc = dv[0] * load8(xi);
-      for (int v = 1; v < kVecs; ++v) acc += dv[v] * load8(xi + 8 * v);
-      gW[size_t(o) * in + i] += hsum8(acc);
-    }
-  }
-}
-
-// dx[i][:] = sum_o W[o][i] dy[o][:] (outputs in index order); with mask, lanes
-// where mask[i] <= 0 (an inactive ReLU) are zeroed.
-EDRNR_CLONES void layer_input_grad(const float* W, int in, int out, const float* dy, const float* mask, float* dx) {
-  const v8f zero = splat(0.f);
-  for (int i = 0; i < in; ++i) {
-    v8f a[kVecs];
-    for (int v = 0; v < kVecs; ++v) a[v] = zero;
-    for (int o = 0; o < out; ++o) {
-      v8f wi = splat(W[size_t(o) * in + i]);
-      const float* d = dy + size_t(o) * kLanes;
-      for (int v = 0; v < kVecs; ++v) a[v] += wi * load8(d + 8 * v);
-    }
-    for (int v = 0; v < kVecs; ++v) {
-      if (mask) a[v] = load8(mask + size_t(i) * kLanes + 8 * v) > zero ? a[v] : zero;
-      store8(dx + size_t(i) * kLanes + 8 * v, a[v]);
-    }
-  }
-}
-
-}  // namespace
-
 void quantize_block(float* block, int rows, float step, float lo, float hi) {
-  const float inv = 1.f / step;
-  for (size_t i = 0; i < size_t(rows) * kLanes; ++i)
-    block[i] = std::clamp(std::floor(block[i] * inv + 0.5f), lo, hi) * step;
+  mlp_quantize_rows(block, rows, step, lo, hi);
 }
 
 void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, float* acts,
@@ -274,7 +184,7 @@ void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* param
     const auto& l = layers[k];
     const bool last = k + 1 == layers.size();
     const int rows = last && last_rows >= 0 ? std::min(last_rows, l.out) : l.out;
-    layer_forward(params + l.w, params + l.b, l.in, rows, x, y, !last);
+    mlp_layer_forward(params + l.w, params + l.b, l.in, rows, x, y, !last);
     if (in_steps && !last) quantize_block(y, l.out, in_steps[k + 1], 0.f, kActivationMax);
     x = y;
     y += size_t(l.out) * kLanes;
@@ -296,14 +206,14 @@ void net_backward(const std::vector<MlpLayout::Layer>& layers, const float* para
   for (int k = n - 1; k >= 0; --k) {
     const auto& l = layers[size_t(k)];
     const float* x = k == 0 ? x0 : acts + act_off[size_t(k - 1)];
-    layer_param_grad(x, dy, l.in, l.out, grad + l.w, grad + l.b);
+    mlp_layer_param_grad(x, dy, l.in, l.out, grad + l.w, grad + l.b);
     if (k > 0) {
       float* dx = bufs[cur];
-      layer_input_grad(params + l.w, l.in, l.out, dy, x, dx);
+      mlp_layer_input_grad(params + l.w, l.in, l.out, dy, x, dx);
       dy = dx;
       cur ^= 1;
     } else if (d_x0) {
-      layer_input_grad(params + l.w, l.in, l.out, dy, nullptr, d_x0);
+      mlp_layer_input_grad(params + l.w, l.in, l.out, dy, nullptr, d_x0);
     }
   }
 }

@@ -8,8 +8,8 @@
 //
 // Determinism: every sum runs in a fixed order (inputs in index order, lanes
 // in a fixed pairwise tree), and lane arithmetic is element-wise, so the
-// results are the same bits whichever instruction set the runtime dispatch
-// picks (SSE2 or AVX2).
+// results are the same bits whichever SIMD target Highway's runtime dispatch
+// picks (train/mlp_layer_kernels.h: SSE2 to AVX-512).
 #include <cstddef>
 #include <cstdint>
 #include <vector>
