@@ -172,10 +172,6 @@ MlpQ quantize_mlp(const MlpLayout& layout, const float* params, const std::vecto
   return q;
 }
 
-void quantize_block(float* block, int rows, float step, float lo, float hi) {
-  mlp_quantize_rows(block, rows, step, lo, hi);
-}
-
 void net_forward(const std::vector<MlpLayout::Layer>& layers, const float* params, const float* x0, float* acts,
                  int last_rows, const float* in_steps) {
   const float* x = x0;

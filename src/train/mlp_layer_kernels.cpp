@@ -155,7 +155,7 @@ void mlp_layer_input_grad(const float* W, int in, int out, const float* dy, cons
   HWY_DYNAMIC_DISPATCH(LayerInputGrad)(W, in, out, dy, mask, dx);
 }
 
-void mlp_quantize_rows(float* block, int rows, float step, float lo, float hi) {
+void quantize_block(float* block, int rows, float step, float lo, float hi) {
   HWY_DYNAMIC_DISPATCH(QuantizeRows)(block, rows, step, lo, hi);
 }
 

@@ -20,8 +20,6 @@ void mlp_layer_param_grad(const float* x, const float* dy, int in, int out, floa
 // where mask[i] is not above 0 (an inactive ReLU) are 0.
 void mlp_layer_input_grad(const float* W, int in, int out, const float* dy, const float* mask, float* dx);
 
-// block[k] = clamp(floor(block[k] / step + 1/2), lo, hi) * step over rows x
-// kLanes values (the reciprocal of step taken once, as std::clamp: a NaN stays).
-void mlp_quantize_rows(float* block, int rows, float step, float lo, float hi);
+// quantize_block (train/mlp_kernels.h) is defined with these kernels.
 
 }  // namespace edrnr::train

@@ -142,7 +142,7 @@ TEST(MlpLayerKernels, QuantizeRowsRoundsHalfUpAndClampsOnEveryTarget) {
   EXPECT_EQ(want[4], lo * step);
   on_every_target([&](const char* name) {
     std::vector<float> got = v;
-    mlp_quantize_rows(got.data(), 5, step, lo, hi);
+    quantize_block(got.data(), 5, step, lo, hi);
     ASSERT_TRUE(same_bits(want, got)) << name;
   });
 }
