@@ -7,6 +7,7 @@
 #include "model/mlp.h"
 #include "train/feature_grid.h"
 #include "train/mlp_kernels.h"
+#include "train/occupancy_kernels.h"
 #include "train/rng.h"
 
 namespace edrnr::train {
@@ -75,6 +76,58 @@ void BM_PyramidInterpolate(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations());
 }
 BENCHMARK(BM_PyramidInterpolate);
+
+// The occupancy refresh's row kernel: kLanes cells of one micro row (every
+// other x, as a sweep part) through the 4 levels, rows in sweep order; the
+// scalar interpolation of the same cells for comparison.
+struct RefreshRows {
+  FeaturePyramid pyr{256, {32, 64, 128, 256}, 1, 0.1f};
+  std::vector<PyramidLevelView> views;
+  float px[kLanes], py[kLanes], pz[kLanes];
+  std::vector<float> x0 = std::vector<float>(size_t(16) * kLanes);
+  RefreshRows() {
+    for (const PyramidLevel& L : pyr.levels()) views.push_back({L.value.data(), L.res, L.shift, true});
+  }
+  // Cells of chunk i: x = 2 j + 64 (i % 4), y = 2 ((i / 4) % 128), z = 2 (i / 512 % 128).
+  void set_up(size_t i, int& xs, int& y, int& z) {
+    xs = 64 * int(i % 4), y = 2 * int((i / 4) % 128), z = 2 * int((i / 512) % 128);
+    for (int j = 0; j < kLanes; ++j) {
+      const uint64_t h = mix64(i * kLanes + size_t(j));
+      px[j] = float(xs + 2 * j) + uniform01(h);
+      py[j] = float(y) + uniform01(mix64(h));
+      pz[j] = float(z) + uniform01(mix64(h + 1));
+    }
+  }
+};
+
+void BM_RefreshInterpolateRow(benchmark::State& state) {
+  RefreshRows r;
+  size_t i = 0;
+  for (auto _ : state) {
+    int xs, y, z;
+    r.set_up(i++, xs, y, z);
+    refresh_interpolate_row(r.views.data(), 4, xs, y, z, kLanes, r.px, r.py, r.pz, r.x0.data());
+    benchmark::DoNotOptimize(r.x0.data());
+  }
+  state.SetItemsProcessed(state.iterations() * kLanes);
+}
+BENCHMARK(BM_RefreshInterpolateRow);
+
+void BM_RefreshInterpolateScalar(benchmark::State& state) {
+  RefreshRows r;
+  size_t i = 0;
+  float out[16];
+  for (auto _ : state) {
+    int xs, y, z;
+    r.set_up(i++, xs, y, z);
+    for (int j = 0; j < kLanes; ++j) {
+      r.pyr.interpolate({r.px[j], r.py[j], r.pz[j]}, {xs + 2 * j, y, z}, out);
+      benchmark::DoNotOptimize(out);
+    }
+  }
+  state.SetItemsProcessed(state.iterations() * kLanes);
+}
+BENCHMARK(BM_RefreshInterpolateScalar);
 
 }  // namespace
 }  // namespace edrnr::train

@@ -4,6 +4,8 @@
 #include <atomic>
 #include <cmath>
 
+#include "train/occupancy_kernels.h"
+
 namespace edrnr::train {
 
 OccupancyGrid::OccupancyGrid(int micro_res)
@@ -12,13 +14,23 @@ OccupancyGrid::OccupancyGrid(int micro_res)
 }
 
 double OccupancyGrid::mean_density() const {
+  // Fixed blocks of cells, summed by the kernel's fixed order and added in
+  // block order: the same bits for any thread count and SIMD target.
+  constexpr size_t kBlock = size_t(1) << 16;
+  const size_t n_cells = density.size();
+  const size_t n_blocks = (n_cells + kBlock - 1) / kBlock;
+  std::vector<double> sums(n_blocks);
+  std::vector<size_t> counts(n_blocks);
+#pragma omp parallel for schedule(static)
+  for (size_t b = 0; b < n_blocks; ++b)
+    occupancy_sum_nonnegative(density.data() + b * kBlock, std::min(kBlock, n_cells - b * kBlock), &sums[b],
+                              &counts[b]);
   double sum = 0;
   size_t n = 0;
-  for (float d : density)
-    if (d >= 0.f) {
-      sum += d;
-      ++n;
-    }
+  for (size_t b = 0; b < n_blocks; ++b) {
+    sum += sums[b];
+    n += counts[b];
+  }
   return n ? sum / double(n) : 0.0;
 }
 
@@ -27,20 +39,37 @@ void OccupancyGrid::rebuild(float threshold) {
   auto& words = micro.words();
   const int n_words = int(words.size());
   // Words hold 64 consecutive x (res is a multiple of 32; 64 | res^3), so each
-  // word is owned by one thread.
+  // word is owned by one thread; a word holds one row's stretch, or two whole
+  // rows when res == 32.
+  const int row_words = std::max(1, res / 64);  // words per row (res >= 64)
+  const int rows_per_word = res < 64 ? 64 / res : 1;
+  constexpr int kChunk = 1024;  // words per kernel call
+#pragma omp parallel for schedule(static)
+  for (int c = 0; c < n_words; c += kChunk)
+    occupancy_threshold_words(density.data() + size_t(c) * 64, size_t(std::min(kChunk, n_words - c)), threshold,
+                              words.data() + c);
+  if (!aabb_known) {
+    rebuild_macro();
+    return;
+  }
 #pragma omp parallel for schedule(static)
   for (int wi = 0; wi < n_words; ++wi) {
-    uint64_t w = 0;
-    for (int b = 0; b < 64; ++b) {
-      const size_t i = size_t(wi) * 64 + size_t(b);
-      const float d = density[i];
-      if (!(d < 0.f || d > threshold)) continue;
-      if (aabb_known) {
-        const int x = int(i % size_t(res)), y = int((i / size_t(res)) % size_t(res)), z = int(i / (size_t(res) * res));
-        if (x < aabb_lo.x || y < aabb_lo.y || z < aabb_lo.z || x > aabb_hi.x || y > aabb_hi.y || z > aabb_hi.z)
-          continue;
+    uint64_t w = words[size_t(wi)];
+    if (w != 0) {
+      // Keep the bits of the AABB's x range in rows whose y and z lie in it.
+      uint64_t keep = 0;
+      for (int r = 0; r < rows_per_word; ++r) {
+        const size_t row = size_t(wi) * size_t(rows_per_word) / size_t(row_words) + size_t(r);
+        const int y = int(row % size_t(res)), z = int(row / size_t(res));
+        if (y < aabb_lo.y || z < aabb_lo.z || y > aabb_hi.y || z > aabb_hi.z) continue;
+        const int x0 = res < 64 ? 0 : (wi % row_words) * 64;  // the word's first x
+        const int n = std::min(res, 64);                      // x per row in the word
+        const int lo = std::max(aabb_lo.x - x0, 0), hi = std::min(aabb_hi.x - x0, n - 1);
+        if (lo > hi) continue;
+        const uint64_t span = (hi - lo == 63) ? ~uint64_t(0) : ((uint64_t(1) << (hi - lo + 1)) - 1) << lo;
+        keep |= span << (r * n);
       }
-      w |= uint64_t(1) << b;
+      w &= keep;
     }
     words[size_t(wi)] = w;
   }
@@ -52,17 +81,36 @@ void OccupancyGrid::rebuild_macro() {
   generation = ++last_generation;
   fine = Bitmap3(res / 4);
   const auto& words = micro.words();
-  // A word holds 64 consecutive x of one row (res is a multiple of 32, so a
-  // word may hold two rows when res == 32).
-  for (size_t wi = 0; wi < words.size(); ++wi) {
-    uint64_t w = words[wi];
-    while (w) {
-      const size_t i = wi * 64 + size_t(__builtin_ctzll(w));
-      w &= w - 1;
-      const int x = int(i % size_t(res)), y = int((i / size_t(res)) % size_t(res)), z = int(i / (size_t(res) * res));
-      fine.set(x / 4, y / 4, z / 4);
+  if (res % 64 != 0) {  // a word may hold two rows (res == 32): bit by bit
+    for (size_t wi = 0; wi < words.size(); ++wi) {
+      uint64_t w = words[wi];
+      while (w) {
+        const size_t i = wi * 64 + size_t(__builtin_ctzll(w));
+        w &= w - 1;
+        const int x = int(i % size_t(res)), y = int((i / size_t(res)) % size_t(res)), z = int(i / (size_t(res) * res));
+        fine.set(x / 4, y / 4, z / 4);
+      }
     }
+    return;
   }
+  // Each fine row is the OR of 4 x 4 micro rows, each run of 4 micro x bits
+  // giving one fine bit. A fine z slab's bits fill whole words (fine res >= 16),
+  // so the slabs are written by one thread each.
+  const int fres = res / 4, row_words = res / 64;
+  auto& fwords = fine.words();
+#pragma omp parallel for schedule(static)
+  for (int fz = 0; fz < fres; ++fz)
+    for (int fy = 0; fy < fres; ++fy)
+      for (int k = 0; k < row_words; ++k) {
+        uint64_t w = 0;
+        for (int dz = 0; dz < 4; ++dz)
+          for (int dy = 0; dy < 4; ++dy) w |= words[micro.index(0, 4 * fy + dy, 4 * fz + dz) / 64 + size_t(k)];
+        if (w == 0) continue;
+        uint64_t bits = 0;  // bit j: micro x bits 4j .. 4j+3 of the word
+        for (int j = 0; j < 16; ++j) bits |= uint64_t(((w >> (4 * j)) & 0xF) != 0) << j;
+        const size_t fi = fine.index(16 * k, fy, fz);
+        fwords[fi / 64] |= bits << (fi % 64);
+      }
 }
 
 bool OccupancyGrid::update_aabb(float threshold, float filter_sigma, float keep) {

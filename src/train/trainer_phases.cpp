@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "train/mlp_kernels.h"
+#include "train/occupancy_kernels.h"
 #include "train/rng.h"
 #include "train/trainer_state.h"
 #include "train/volume.h"
@@ -47,24 +48,33 @@ void Trainer::State::refresh_occupancy_part(int part, float decay) {
   const int ny = y_first <= hi.y ? (hi.y - y_first) / 2 + 1 : 0;
   const int nz = z_first <= hi.z ? (hi.z - z_first) / 2 + 1 : 0;
   const int rows = ny * nz;
+  // The pyramid's levels as the row kernel reads them.
+  std::vector<PyramidLevelView> levels;
+  for (size_t li = 0; li < pyramid.levels().size(); ++li) {
+    const PyramidLevel& L = pyramid.levels()[li];
+    levels.push_back({L.value.data(), L.res, L.shift, pyramid.level_active(li)});
+  }
+  if (pyramid.channels() != F)
+    fail("the occupancy refresh needs the pyramid's {} channels to be the density net's {} inputs", pyramid.channels(),
+         F);
 #pragma omp parallel
   {
-    std::vector<float> x0(size_t(F) * kLanes), acts(size_t(layout.density_act_floats) * kLanes),
-        f(static_cast<size_t>(F));
+    std::vector<float> x0(size_t(F) * kLanes), acts(size_t(layout.density_act_floats) * kLanes);
+    float px[kLanes] = {}, py[kLanes] = {}, pz[kLanes] = {};  // the kernel ignores lanes from nl on
     const float* params = mlp_params.data();
 #pragma omp for schedule(dynamic, 16)
     for (int row = 0; row < rows; ++row) {
       const int y = y_first + 2 * (row % ny), z = z_first + 2 * (row / ny);
       for (int xs = x_first; xs <= hi.x; xs += 2 * kLanes) {
-        std::fill(x0.begin(), x0.end(), 0.f);
         int nl = 0;
         for (int x = xs; x <= hi.x && nl < kLanes; x += 2, ++nl) {
           const size_t cell = size_t(linear_index(x, y, z, R));
           const uint64_t h = hash_combine(base, cell);
-          const Vec3f p{float(x) + uniform01(h), float(y) + uniform01(mix64(h)), float(z) + uniform01(mix64(h + 1))};
-          pyramid.interpolate(p, {x, y, z}, f.data());
-          for (int c = 0; c < F; ++c) x0[size_t(c) * kLanes + size_t(nl)] = f[size_t(c)];
+          px[nl] = float(x) + uniform01(h);
+          py[nl] = float(y) + uniform01(mix64(h));
+          pz[nl] = float(z) + uniform01(mix64(h + 1));
         }
+        refresh_interpolate_row(levels.data(), int(levels.size()), xs, y, z, nl, px, py, pz, x0.data());
         net_forward(layout.density, params, x0.data(), acts.data(), 1);
         const float* raw = acts.data() + size_t(layout.density_act_floats - G) * kLanes;
         int l = 0;
