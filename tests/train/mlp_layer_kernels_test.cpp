@@ -5,7 +5,6 @@
 #include "train/mlp_layer_kernels.h"
 
 #include <gtest/gtest.h>
-#include <hwy/targets.h>
 
 #include <algorithm>
 #include <cmath>
@@ -13,6 +12,8 @@
 #include <limits>
 #include <random>
 #include <vector>
+
+#include "hwy_targets.h"
 
 namespace edrnr::train {
 namespace {
@@ -35,16 +36,6 @@ std::vector<float> random_values(std::mt19937& rng, size_t n, float special_shar
 }
 
 float relu_of(float a) { return a > 0.f ? a : 0.f; }
-
-// Runs body once per SIMD target; the name of the target for messages.
-template <class Body>
-void on_every_target(Body body) {
-  for (int64_t target : hwy::SupportedAndGeneratedTargets()) {
-    hwy::SetSupportedTargetsForTest(target);
-    body(hwy::TargetName(target));
-  }
-  hwy::SetSupportedTargetsForTest(0);
-}
 
 TEST(MlpLayerKernels, ForwardIsTheContractsSumOnEveryTarget) {
   std::mt19937 rng(5);

@@ -6,7 +6,6 @@
 #include "train/occupancy_kernels.h"
 
 #include <gtest/gtest.h>
-#include <hwy/targets.h>
 #include <omp.h>
 
 #include <cmath>
@@ -15,21 +14,12 @@
 #include <random>
 #include <vector>
 
+#include "hwy_targets.h"
 #include "train/feature_grid.h"
 #include "train/occupancy.h"
 
 namespace edrnr::train {
 namespace {
-
-// Runs body once per SIMD target; the name of the target for messages.
-template <class Body>
-void on_every_target(Body body) {
-  for (int64_t target : hwy::SupportedAndGeneratedTargets()) {
-    hwy::SetSupportedTargetsForTest(target);
-    body(hwy::TargetName(target));
-  }
-  hwy::SetSupportedTargetsForTest(0);
-}
 
 // Densities as the refresh leaves them: mostly small, some large, some not
 // evaluated yet (-1), and a share of -0, NaN and values at `threshold` exactly.
@@ -131,8 +121,8 @@ void expect_rows_match_the_pyramid(const FeaturePyramid& pyr, uint64_t seed) {
           for (int c = 0; c < F; ++c) {
             const float got = x0[size_t(c) * kLanes + size_t(i)], w = i < nl ? want[size_t(c)] : 0.f;
             ASSERT_EQ(std::memcmp(&got, &w, sizeof got), 0)
-                << name << " row (" << y << ", " << z << ") x_first " << x_first << " lane " << i << " channel "
-                << c << ": " << got << " vs " << w;
+                << name << " row (" << y << ", " << z << ") x_first " << x_first << " lane " << i << " channel " << c
+                << ": " << got << " vs " << w;
           }
         }
       }
@@ -174,8 +164,8 @@ TEST(OccupancyKernels, GridBitmapsFollowTheirDefinition) {
       for (int z = 0; z < res; ++z)
         for (int y = 0; y < res; ++y)
           for (int x = 0; x < res; ++x) {
-            const bool inside = !b.known || (x >= b.lo.x && y >= b.lo.y && z >= b.lo.z && x <= b.hi.x &&
-                                             y <= b.hi.y && z <= b.hi.z);
+            const bool inside =
+                !b.known || (x >= b.lo.x && y >= b.lo.y && z >= b.lo.z && x <= b.hi.x && y <= b.hi.y && z <= b.hi.z);
             const bool want = inside && bit_of(g.density[g.micro.index(x, y, z)], threshold);
             ASSERT_EQ(g.micro.get(x, y, z), want) << "res " << res << " voxel " << x << " " << y << " " << z;
             if (want) fine.set(x / 4, y / 4, z / 4);
